@@ -1,0 +1,64 @@
+"""Entry point of the ``semslam`` command.
+
+Sub-commands are discovered: every module ``semslam/cli/cmd_*.py`` defines
+``register(subparsers, common)`` and adds its parsers with ``parser.set_defaults(func=run)``, where
+``run(args) -> int``. ``common`` is a parent parser carrying ``--json``, so that ``--json`` works both
+before the sub-command (global) and after it. Heavy imports belong inside ``run``.
+
+Errors: a :class:`~semslam.errors.SemslamError` prints one line ``semslam: error: ...`` on stderr and
+exits 1; a usage error exits 2 (argparse); anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from typing import Sequence
+
+from .. import __version__
+from ..errors import SemslamError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                        help="print machine-readable JSON instead of text")
+    parser = argparse.ArgumentParser(
+        prog="semslam",
+        description="Object-level SLAM for underwater vehicles: recognise known objects in laser scans, "
+                    "estimate their pose, and use them as landmarks.",
+    )
+    parser.add_argument("--version", action="version", version=f"semslam {__version__}")
+    parser.add_argument("--json", action="store_true", default=False,
+                        help="print machine-readable JSON instead of text")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    from . import __path__ as cli_path
+
+    for info in sorted(pkgutil.iter_modules(cli_path), key=lambda m: m.name):
+        if info.name.startswith("cmd_"):
+            module = importlib.import_module(f"{__package__}.{info.name}")
+            module.register(sub, common)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except SemslamError as exc:
+        message = " ".join(str(exc).split())
+        print(f"semslam: error: {message}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("semslam: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""semslam.simulation"""
