@@ -1,1 +1,1 @@
-"""semslam.report"""
+"""Reports: the papers' tables and figures regenerated from a run, as PNG and one self-contained HTML page."""

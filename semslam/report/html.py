@@ -1,0 +1,95 @@
+"""A single self-contained HTML page: figures embedded as base64 PNG, tables, metrics.
+
+The page is built from :class:`Section` objects so that every producer (demo, ``semslam report``, a
+``slam`` or ``recognize`` run) adds what it has and nothing else.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+from .._atomic import atomic_write_bytes, atomic_write_text
+
+
+@dataclass
+class Figure:
+    """A figure saved as PNG beside the report and embedded in it."""
+
+    filename: str
+    png: bytes
+    caption: str
+
+
+@dataclass
+class Section:
+    title: str
+    text: str = ""
+    tables: list[tuple[str, Sequence[str], Sequence[Sequence[object]]]] = field(default_factory=list)
+    figures: list[Figure] = field(default_factory=list)
+
+
+def figure_to_png(fig, dpi: int = 110) -> bytes:
+    """Render a matplotlib figure to PNG bytes and close it."""
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _table_html(caption: str, header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    def cell(v: object) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return html.escape(str(v))
+
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
+    return f"<table><caption>{html.escape(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+_STYLE = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+h1{font-size:1.6em}h2{font-size:1.25em;border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
+table{border-collapse:collapse;margin:1em 0;font-size:.9em}caption{text-align:left;font-weight:600;padding:.3em 0}
+td,th{border:1px solid #bbb;padding:.25em .6em;text-align:right}th{background:#f0f0f0}
+td:first-child,th:first-child{text-align:left}figure{margin:1em 0}img{max-width:100%}
+figcaption{font-size:.9em;color:#444}pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.8em}
+"""
+
+
+def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *, metrics: dict | None = None,
+                 summary: str = "") -> Path:
+    """Write every figure as PNG into ``run_dir/figures`` and ``run_dir/report.html`` (atomically).
+
+    Returns the report's path.
+    """
+    run_dir = Path(run_dir)
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+             f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
+    if summary:
+        parts.append(f"<p>{html.escape(summary)}</p>")
+    for sec in sections:
+        parts.append(f"<h2>{html.escape(sec.title)}</h2>")
+        if sec.text:
+            parts.append("".join(f"<p>{html.escape(p)}</p>" for p in sec.text.split("\n\n")))
+        for caption, header, rows in sec.tables:
+            parts.append(_table_html(caption, header, rows))
+        for fig in sec.figures:
+            atomic_write_bytes(run_dir / "figures" / fig.filename, fig.png)
+            b64 = base64.b64encode(fig.png).decode("ascii")
+            parts.append(f"<figure><img alt='{html.escape(fig.caption)}' src='data:image/png;base64,{b64}'>"
+                         f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>")
+    if metrics is not None:
+        parts.append("<h2>All metrics (metrics.json)</h2><pre>" + html.escape(json.dumps(metrics, indent=2)) + "</pre>")
+    parts.append("</body></html>")
+    path = run_dir / "report.html"
+    atomic_write_text(path, "\n".join(parts))
+    return path
