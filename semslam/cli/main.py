@@ -12,6 +12,7 @@ exits 1; a usage error exits 2 (argparse); anything else is a bug and keeps its 
 from __future__ import annotations
 
 import argparse
+import os
 import importlib
 import pkgutil
 import sys
@@ -54,6 +55,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SemslamError as exc:
         message = " ".join(str(exc).split())
         print(f"semslam: error: {message}", file=sys.stderr)
+        return 1
+    except BrokenPipeError:  # e.g. `semslam info X --json | head`
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
         return 1
     except KeyboardInterrupt:
         print("semslam: interrupted", file=sys.stderr)
