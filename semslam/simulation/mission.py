@@ -146,6 +146,27 @@ class Mission:
     scans: list[ScanRecord] = field(default_factory=list)
     directory: Path | None = None
     seed: int | None = None
+    #: In-memory scans (scan_id -> PointCloud) of a simulated mission; None for a mission read from disk.
+    scan_clouds: dict | None = None
+
+    def load_scan(self, scan_id: int):
+        """The cloud of scan ``scan_id``: from memory when the mission was simulated, else read from
+        ``directory / record.path`` with :func:`semslam.io.read_point_cloud` (frame ``"scanner"``)."""
+        if self.scan_clouds is not None and scan_id in self.scan_clouds:
+            return self.scan_clouds[scan_id]
+        record = next((s for s in self.scans if s.scan_id == scan_id), None)
+        if record is None:
+            raise MissionError(f"The 'scan_id' argument of Mission.load_scan must be one of the mission's scan ids. Got {scan_id!r} instead.")
+        if self.directory is None:
+            raise MissionError(f"Scan {scan_id} is not in memory and the mission has no directory to read it from.")
+        from ..errors import PcdError
+        from ..io import read_point_cloud
+
+        path = Path(self.directory) / record.path
+        try:
+            return read_point_cloud(path, frame_id="scanner")
+        except PcdError as exc:
+            raise MissionError(f"Scan {scan_id} of the mission in {str(self.directory)!r} cannot be read: {exc}") from None
 
     @property
     def duration_s(self) -> float:

@@ -1,0 +1,284 @@
+"""Simulator configuration: frozen dataclasses with documented defaults (SI units, radians).
+
+Where the defaults come from:
+
+* Objects and tank: Himri et al. 2018/2019 (four PVC fittings on the floor of the CIRS tank, ~16 x 8 x
+  5 m, Girona 500 flown in an approximate square over them, ~3 loops).
+* Scanner: the papers' Girona laser scanner (laser line + galvanometer mirror + camera, 3-10 Hz). Noise
+  is triangulation-like: sigma = ``noise_floor_m + noise_range2_per_m * r**2`` along the camera ray.
+* Kinect: 640 x 480, f = 525 px, baseline 7.5 cm, disparity quantised to 1/8 px; depth error growing
+  with the square of depth, sigma_z ~ 1.5e-3 * z**2 (Khoshelham & Elberink 2012).
+* Navigation sensors (design/slam-notes.md section 3): DVL 5 Hz, sigma = 0.3 % |v| + 1 mm/s per axis,
+  worse over the tank's sloped sides (the papers' observed drift); AHRS 20 Hz, Xsens MTi-300-like
+  0.2 / 0.2 / 1.0 degree white noise; pressure depth 10 Hz, 2 cm.
+
+Every config has ``to_dict`` / ``from_dict`` (JSON round trip, used for mission.json).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import SimulationError
+
+
+def _check(cfg: Any, positive: tuple[str, ...] = (), nonneg: tuple[str, ...] = (), prob: tuple[str, ...] = ()) -> None:
+    name = type(cfg).__name__
+    for attr in positive + nonneg + prob:
+        v = getattr(cfg, attr)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SimulationError(f"The {attr!r} field of {name} must be a finite number. Got {v!r} instead.")
+    for attr in positive:
+        if getattr(cfg, attr) <= 0:
+            raise SimulationError(f"The {attr!r} field of {name} must be > 0. Got {getattr(cfg, attr)!r} instead.")
+    for attr in nonneg:
+        if getattr(cfg, attr) < 0:
+            raise SimulationError(f"The {attr!r} field of {name} must be >= 0. Got {getattr(cfg, attr)!r} instead.")
+    for attr in prob:
+        if not 0 <= getattr(cfg, attr) <= 1:
+            raise SimulationError(f"The {attr!r} field of {name} must be a probability in [0, 1]. Got {getattr(cfg, attr)!r} instead.")
+
+
+def _check_vec(cfg: Any, attr: str, n: int) -> None:
+    v = getattr(cfg, attr)
+    ok = isinstance(v, (tuple, list)) and len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
+    if not ok:
+        raise SimulationError(f"The {attr!r} field of {type(cfg).__name__} must be {n} finite numbers. Got {v!r} instead.")
+    object.__setattr__(cfg, attr, tuple(float(x) for x in v))
+
+
+class _Dict:
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)  # type: ignore[call-overload]
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Any:
+        if not isinstance(d, dict):
+            raise SimulationError(f"A {cls.__name__} record must be a mapping. Got {type(d).__name__} instead.")
+        names = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        unknown = set(d) - set(names)
+        if unknown:
+            raise SimulationError(f"Unknown field(s) {sorted(unknown)} in a {cls.__name__} record. Expected some of {sorted(names)}.")
+        kwargs = {}
+        for k, v in d.items():
+            sub = _SUBCONFIGS.get(k)
+            kwargs[k] = sub.from_dict(v) if sub is not None and cls is SimulatorConfig else (tuple(v) if isinstance(v, list) else v)
+        return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class WorldConfig(_Dict):
+    """The CIRS-like tank (world NED, origin at the water surface above the tank centre, x along the
+    tank's long side) and what lies on its floor.
+
+    The floor is flat at ``tank_depth_m`` except near the walls, where it rises linearly over
+    ``slope_run_m`` to the rim at z = 0. The four fittings sit at the corners of a square of side
+    ``object_spacing_m`` centred at ``objects_centre_ne_m`` (north, east), in their most probable
+    resting pose with a random yaw and +-``placement_jitter_m`` of position jitter.
+    """
+
+    tank_length_m: float = 16.0
+    tank_width_m: float = 8.0
+    tank_depth_m: float = 5.0
+    slope_run_m: float = 1.5
+    object_spacing_m: float = 1.75
+    objects_centre_ne_m: tuple = (0.0, 1.4)
+    placement_jitter_m: float = 0.15
+    clutter: bool = False
+    n_clutter: int = 6
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("tank_length_m", "tank_width_m", "tank_depth_m", "object_spacing_m"),
+               nonneg=("slope_run_m", "placement_jitter_m"))
+        _check_vec(self, "objects_centre_ne_m", 2)
+        if 2 * self.slope_run_m >= min(self.tank_length_m, self.tank_width_m):
+            raise SimulationError(f"The 'slope_run_m' field of WorldConfig must be < half the tank width. Got {self.slope_run_m} instead.")
+        if isinstance(self.n_clutter, bool) or not isinstance(self.n_clutter, int) or self.n_clutter < 0:
+            raise SimulationError(f"The 'n_clutter' field of WorldConfig must be an integer >= 0. Got {self.n_clutter!r} instead.")
+
+
+@dataclass(frozen=True)
+class TrajectoryConfig(_Dict):
+    """Girona 500-like flight: a square with rounded corners through the four objects, ``loops`` times,
+    at ``speed_mps`` and ``altitude_m`` above the flat floor, with small roll/pitch oscillations."""
+
+    loops: int = 3
+    speed_mps: float = 0.3
+    altitude_m: float = 1.5
+    corner_radius_m: float = 0.35
+    altitude_wave_m: float = 0.1
+    roll_amplitude_rad: float = math.radians(1.5)
+    pitch_amplitude_rad: float = math.radians(2.0)
+    truth_rate_hz: float = 50.0
+    start_ramp_s: float = 3.0
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("speed_mps", "altitude_m", "truth_rate_hz"),
+               nonneg=("corner_radius_m", "altitude_wave_m", "roll_amplitude_rad", "pitch_amplitude_rad", "start_ramp_s"))
+        if isinstance(self.loops, bool) or not isinstance(self.loops, int) or self.loops < 1:
+            raise SimulationError(f"The 'loops' field of TrajectoryConfig must be an integer >= 1. Got {self.loops!r} instead.")
+
+
+@dataclass(frozen=True)
+class ScannerConfig(_Dict):
+    """The laser scanner (frame: z out of the viewport along the optical axis, x along the baseline
+    from the laser to the camera, y = z cross x). The galvanometer sweeps the laser plane (spanned by y
+    and the sweep direction) from -``sweep_fov_rad``/2 to +``sweep_fov_rad``/2 about y in
+    ``1 / scan_rate_hz`` seconds, ``n_lines`` lines of ``points_per_line`` samples spread over
+    ``line_fov_rad``. The camera sits ``baseline_m`` along +x, toed in by ``camera_toe_in_rad``.
+
+    ``T_vehicle_scanner`` (xyz metres, rpy radians): default 0.6 m forward, 0.3 m below the vehicle
+    origin, the optical axis along the vehicle z (looking down) and the scanner x along the vehicle x.
+    """
+
+    scan_rate_hz: float = 3.0
+    n_lines: int = 320
+    points_per_line: int = 320
+    sweep_fov_rad: float = math.radians(50.0)
+    line_fov_rad: float = math.radians(50.0)
+    baseline_m: float = 0.3
+    camera_toe_in_rad: float = math.radians(5.0)
+    camera_fov_rad: float = math.radians(70.0)
+    min_range_m: float = 0.3
+    max_range_m: float = 4.0
+    noise_floor_m: float = 0.0005
+    noise_range2_per_m: float = 0.001
+    dropout_prob: float = 0.02
+    backscatter_prob: float = 0.001
+    attenuation_per_m: float = 0.3
+    only_when_objects_in_view: bool = True
+    T_vehicle_scanner_xyz_m: tuple = (0.6, 0.0, 0.3)
+    T_vehicle_scanner_rpy_rad: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("scan_rate_hz", "sweep_fov_rad", "line_fov_rad", "baseline_m", "camera_fov_rad", "max_range_m"),
+               nonneg=("camera_toe_in_rad", "min_range_m", "noise_floor_m", "noise_range2_per_m", "attenuation_per_m"),
+               prob=("dropout_prob", "backscatter_prob"))
+        for attr in ("n_lines", "points_per_line"):
+            v = getattr(self, attr)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 2:
+                raise SimulationError(f"The {attr!r} field of ScannerConfig must be an integer >= 2. Got {v!r} instead.")
+        if self.min_range_m >= self.max_range_m:
+            raise SimulationError(f"The 'min_range_m' field of ScannerConfig must be < max_range_m ({self.max_range_m}). Got {self.min_range_m} instead.")
+        if self.sweep_fov_rad >= math.pi or self.line_fov_rad >= math.pi:
+            raise SimulationError("The fields 'sweep_fov_rad' and 'line_fov_rad' of ScannerConfig must be < pi.")
+        _check_vec(self, "T_vehicle_scanner_xyz_m", 3)
+        _check_vec(self, "T_vehicle_scanner_rpy_rad", 3)
+
+
+@dataclass(frozen=True)
+class KinectConfig(_Dict):
+    """Kinect-like depth camera for the view database: views every 360/n degrees of azimuth around the
+    object (in its most probable resting pose) at ``elevation_rad`` above the floor, ``distance_m`` from
+    its centre of mass. Depth noise sigma_z = ``depth_noise_per_m * z**2``, applied in disparity and
+    quantised to ``disparity_step_px`` (f * baseline / z)."""
+
+    width_px: int = 640
+    height_px: int = 480
+    focal_px: float = 525.0
+    baseline_m: float = 0.075
+    disparity_step_px: float = 0.125
+    depth_noise_per_m: float = 0.0015
+    distance_m: float = 0.7
+    elevation_rad: float = math.radians(45.0)
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("focal_px", "baseline_m", "distance_m"), nonneg=("disparity_step_px", "depth_noise_per_m", "elevation_rad"))
+        for attr in ("width_px", "height_px"):
+            v = getattr(self, attr)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 8:
+                raise SimulationError(f"The {attr!r} field of KinectConfig must be an integer >= 8. Got {v!r} instead.")
+        if self.elevation_rad >= math.pi / 2:
+            raise SimulationError(f"The 'elevation_rad' field of KinectConfig must be < pi/2. Got {self.elevation_rad} instead.")
+
+
+@dataclass(frozen=True)
+class DvlConfig(_Dict):
+    """Doppler velocity log (body-frame velocity, bottom lock). Per-axis white noise sigma =
+    ``noise_rel`` * |v| + ``noise_abs_mps``. When any of the four Janus beams (``beam_angle_rad`` from
+    vertical) hits the sloped sides, sigma is multiplied by ``slope_noise_factor`` and the outlier and
+    dropout probabilities become the ``slope_*`` ones. An outlier adds N(0, ``outlier_std_mps``) per axis;
+    a dropout is an invalid (NaN) row."""
+
+    rate_hz: float = 5.0
+    noise_rel: float = 0.003
+    noise_abs_mps: float = 0.001
+    dropout_prob: float = 0.01
+    outlier_prob: float = 0.0
+    outlier_std_mps: float = 0.1
+    slope_noise_factor: float = 5.0
+    slope_dropout_prob: float = 0.1
+    slope_outlier_prob: float = 0.05
+    beam_angle_rad: float = math.radians(30.0)
+    max_altitude_m: float = 30.0
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("rate_hz", "slope_noise_factor", "max_altitude_m"),
+               nonneg=("noise_rel", "noise_abs_mps", "outlier_std_mps", "beam_angle_rad"),
+               prob=("dropout_prob", "outlier_prob", "slope_dropout_prob", "slope_outlier_prob"))
+
+
+@dataclass(frozen=True)
+class AhrsConfig(_Dict):
+    """Attitude (roll, pitch, yaw) with white noise ``noise_rpy_rad`` and a yaw bias: constant
+    ``yaw_bias_rad`` plus a random walk of ``yaw_bias_walk_rad_per_sqrt_s`` (0 = off)."""
+
+    rate_hz: float = 20.0
+    noise_rpy_rad: tuple = (math.radians(0.2), math.radians(0.2), math.radians(1.0))
+    yaw_bias_rad: float = 0.0
+    yaw_bias_walk_rad_per_sqrt_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("rate_hz",), nonneg=("yaw_bias_walk_rad_per_sqrt_s",))
+        _check_vec(self, "noise_rpy_rad", 3)
+        if min(self.noise_rpy_rad) < 0:
+            raise SimulationError(f"The 'noise_rpy_rad' field of AhrsConfig must be >= 0. Got {self.noise_rpy_rad} instead.")
+        if not math.isfinite(self.yaw_bias_rad):
+            raise SimulationError(f"The 'yaw_bias_rad' field of AhrsConfig must be finite. Got {self.yaw_bias_rad} instead.")
+
+
+@dataclass(frozen=True)
+class DepthConfig(_Dict):
+    """Pressure depth (metres, world z) with white noise ``noise_m`` and a constant ``bias_m``."""
+
+    rate_hz: float = 10.0
+    noise_m: float = 0.02
+    bias_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("rate_hz",), nonneg=("noise_m",))
+        if not math.isfinite(self.bias_m):
+            raise SimulationError(f"The 'bias_m' field of DepthConfig must be finite. Got {self.bias_m} instead.")
+
+
+@dataclass(frozen=True)
+class SimulatorConfig(_Dict):
+    """Everything :func:`semslam.simulation.simulate_mission` needs (the seed is separate)."""
+
+    world: WorldConfig = field(default_factory=WorldConfig)
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    scanner: ScannerConfig = field(default_factory=ScannerConfig)
+    dvl: DvlConfig = field(default_factory=DvlConfig)
+    ahrs: AhrsConfig = field(default_factory=AhrsConfig)
+    depth: DepthConfig = field(default_factory=DepthConfig)
+
+    def __post_init__(self) -> None:
+        for name, cls in _SUBCONFIGS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise SimulationError(f"The {name!r} field of SimulatorConfig must be a {cls.__name__}. Got {type(getattr(self, name)).__name__} instead.")
+
+    @classmethod
+    def quick(cls) -> SimulatorConfig:
+        """A small, fast configuration for tests and smoke runs: one loop, coarse scans (~10k rays)."""
+        return cls(trajectory=TrajectoryConfig(loops=1), scanner=ScannerConfig(n_lines=100, points_per_line=100))
+
+    def replace(self, **sections: Any) -> SimulatorConfig:
+        """A copy with whole sections replaced, e.g. ``cfg.replace(dvl=DvlConfig(rate_hz=10))``."""
+        return dataclasses.replace(self, **sections)
+
+
+_SUBCONFIGS = {"world": WorldConfig, "trajectory": TrajectoryConfig, "scanner": ScannerConfig,
+               "dvl": DvlConfig, "ahrs": AhrsConfig, "depth": DepthConfig}

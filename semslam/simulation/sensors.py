@@ -1,0 +1,75 @@
+"""Navigation sensors: DVL (body velocity), AHRS (attitude), pressure depth. Each samples the
+trajectory's closed-form truth at its own rate and adds its configured errors (see
+:mod:`semslam.simulation.config` for the defaults and their sources)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import rotations_from_rpy, wrap_angle
+from .config import AhrsConfig, DepthConfig, DvlConfig, WorldConfig
+from .mission import AhrsLog, DepthLog, DvlLog
+from .trajectory import Trajectory
+from .world import floor_depth_m, over_slope
+
+
+def sensor_stamps(rate_hz: float, duration_s: float) -> np.ndarray:
+    """``k / rate_hz`` for every k with stamp <= ``duration_s`` (exact multiples, no drift)."""
+    n = int(np.floor(duration_s * rate_hz + 1e-9)) + 1
+    return np.arange(n) / rate_hz
+
+
+def dvl_beams_over_slope(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.ndarray, beam_angle_rad: float) -> np.ndarray:
+    """True where any of the four Janus beams (azimuths 45 + k 90 degrees in the body frame,
+    ``beam_angle_rad`` from the body z axis) reaches the floor on a slope (flat-floor approximation)."""
+    az = np.radians([45.0, 135.0, 225.0, 315.0])
+    beams_body = np.column_stack([np.sin(beam_angle_rad) * np.cos(az), np.sin(beam_angle_rad) * np.sin(az),
+                                  np.full(4, np.cos(beam_angle_rad))])
+    R = rotations_from_rpy(rpy_rad)
+    beams = np.einsum("nij,bj->nbi", R, beams_body)  # (N, 4, 3) world directions
+    down = np.maximum(beams[..., 2], 1e-3)
+    altitude = floor_depth_m(world, position_ned_m[:, 0], position_ned_m[:, 1]) - position_ned_m[:, 2]
+    reach = altitude[:, None] / down  # range to the flat floor plane
+    feet = position_ned_m[:, None, :2] + beams[..., :2] * reach[..., None]
+    return over_slope(world, feet[..., 0], feet[..., 1]).any(axis=1)
+
+
+def simulate_dvl(traj: Trajectory, world: WorldConfig, cfg: DvlConfig, rng: np.random.Generator) -> DvlLog:
+    """DVL log: body velocity + white noise (0.3 % |v| + 1 mm/s by default), worse over slopes, with
+    outliers and dropouts (NaN rows, ``valid`` False)."""
+    t = sensor_stamps(cfg.rate_hz, traj.duration_s)
+    truth = traj.sample(t)
+    v = truth.velocity_body_mps
+    slope = dvl_beams_over_slope(world, truth.position_ned_m, truth.rpy_rad, cfg.beam_angle_rad)
+    sigma = cfg.noise_rel * np.linalg.norm(v, axis=1) + cfg.noise_abs_mps
+    sigma = np.where(slope, sigma * cfg.slope_noise_factor, sigma)
+    noise = rng.normal(0.0, 1.0, v.shape) * sigma[:, None]
+    p_out = np.where(slope, cfg.slope_outlier_prob, cfg.outlier_prob)
+    outlier = rng.random(len(t)) < p_out
+    spikes = rng.normal(0.0, cfg.outlier_std_mps, v.shape)
+    meas = v + noise + np.where(outlier[:, None], spikes, 0.0)
+    p_drop = np.where(slope, cfg.slope_dropout_prob, cfg.dropout_prob)
+    altitude = floor_depth_m(world, truth.position_ned_m[:, 0], truth.position_ned_m[:, 1]) - truth.position_ned_m[:, 2]
+    valid = (rng.random(len(t)) >= p_drop) & (altitude <= cfg.max_altitude_m)
+    meas[~valid] = np.nan
+    return DvlLog(t, meas, valid)
+
+
+def simulate_ahrs(traj: Trajectory, cfg: AhrsConfig, rng: np.random.Generator) -> AhrsLog:
+    """AHRS log: true roll, pitch, yaw + white noise + yaw bias (constant plus random walk), wrapped."""
+    t = sensor_stamps(cfg.rate_hz, traj.duration_s)
+    truth = traj.sample(t)
+    noise = rng.normal(0.0, 1.0, (len(t), 3)) * np.asarray(cfg.noise_rpy_rad)
+    walk_steps = rng.normal(0.0, 1.0, len(t)) * cfg.yaw_bias_walk_rad_per_sqrt_s * np.sqrt(1.0 / cfg.rate_hz)
+    walk_steps[0] = 0.0
+    bias = cfg.yaw_bias_rad + np.cumsum(walk_steps)
+    rpy = truth.rpy_rad + noise
+    rpy[:, 2] += bias
+    return AhrsLog(t, wrap_angle(rpy))
+
+
+def simulate_depth(traj: Trajectory, cfg: DepthConfig, rng: np.random.Generator) -> DepthLog:
+    """Pressure depth log: world z + white noise + constant bias."""
+    t = sensor_stamps(cfg.rate_hz, traj.duration_s)
+    z = traj.sample(t).position_ned_m[:, 2]
+    return DepthLog(t, z + cfg.bias_m + rng.normal(0.0, cfg.noise_m, len(t)))
