@@ -1,1 +1,25 @@
-"""semslam.descriptors"""
+"""Point-cloud descriptors as PCL computes them: normals, FPFH (per point), ESF and VFH (global).
+
+See /work/shared/design/pcl-algorithms.md for the PCL behaviour reproduced here.
+"""
+
+from .esf import ESF_SIZE, compute_esf, glibc_rand
+from .fpfh import compute_fpfh, compute_spfh
+from .neighbors import Neighborhoods, find_neighbors
+from .normals import NormalsResult, estimate_normals
+from .vfh import VFH_SIZE, VFH_VARIANTS, compute_vfh
+
+__all__ = [
+    "ESF_SIZE",
+    "Neighborhoods",
+    "NormalsResult",
+    "VFH_SIZE",
+    "VFH_VARIANTS",
+    "compute_esf",
+    "compute_fpfh",
+    "compute_spfh",
+    "compute_vfh",
+    "estimate_normals",
+    "find_neighbors",
+    "glibc_rand",
+]

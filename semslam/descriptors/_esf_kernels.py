@@ -1,0 +1,400 @@
+"""Numba kernels of PCL's ESF (Ensemble of Shape Functions, 640 bins) in float32 arithmetic, and of
+glibc's ``rand()``. Don't call directly; use :func:`semslam.descriptors.compute_esf`.
+
+Every float operation below is float32 and in PCL 1.13's order (Eigen's 4-vector reductions sum
+as (x*x + z*z) + (y*y + 0)), so that the PCL sampler reproduces PCL bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+GRID = 64
+GRID_H = 32
+PAD = GRID + 2
+BINS = 64
+F0 = np.float32(0.0)
+F05 = np.float32(0.5)
+F1 = np.float32(1.0)
+F2 = np.float32(2.0)
+F32 = np.float32(32.0)
+F63 = np.float32(63.0)
+F_AREA = np.float32(0.001)
+PIH = np.float32(np.float32(math.pi) / np.float32(2.0))
+WEIGHTS = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 2.0, 2.0, 2.0], dtype=np.float32)
+
+
+# ---------------------------------------------------------------- glibc rand() (TYPE_3)
+@njit(cache=True)
+def glibc_srand(seed):  # pragma: no cover - compiled
+    """State of glibc's ``random_r`` after ``srand(seed)`` and its 310 discarded outputs.
+
+    Returns an int64 array of 32: the last 31 values r_{i-31..i-1} (mod 2^32) in a ring, and at
+    index 31 the position i of the next value.
+    """
+    r = np.zeros(344, dtype=np.int64)
+    word = np.int64(seed) & 0xFFFFFFFF
+    if word >= 2**31:
+        word -= 2**32  # glibc stores the seed in an int32
+    if word == 0:
+        word = 1
+    r[0] = word
+    for i in range(1, 31):
+        # Schrage's method, with C's truncating division
+        hi = abs(word) // 127773
+        lo = abs(word) % 127773
+        if word < 0:
+            hi = -hi
+            lo = -lo
+        word = 16807 * lo - 2836 * hi
+        if word < 0:
+            word += 2147483647
+        r[i] = word
+    for i in range(31, 34):
+        r[i] = r[i - 31]
+    for i in range(34, 344):
+        r[i] = (r[i - 31] + r[i - 3]) & 0xFFFFFFFF
+    state = np.zeros(32, dtype=np.int64)
+    for i in range(313, 344):
+        state[i % 31] = r[i] & 0xFFFFFFFF
+    state[31] = 344
+    return state
+
+
+@njit(cache=True)
+def glibc_rand_fill(state, out):  # pragma: no cover - compiled
+    """Fill ``out`` (int64) with the next ``rand()`` outputs, advancing ``state`` in place."""
+    i = state[31]
+    for k in range(len(out)):
+        v = (state[(i - 31) % 31] + state[(i - 3) % 31]) & 0xFFFFFFFF
+        state[i % 31] = v
+        out[k] = v >> 1
+        i += 1
+    state[31] = i
+
+
+# ---------------------------------------------------------------- ESF
+@njit(cache=True)
+def _vox(v):  # pragma: no cover - compiled
+    if v < F0:
+        return math.floor(v) + GRID_H
+    return math.ceil(v) + GRID_H - 1
+
+
+@njit(cache=True)
+def esf_prepare(points):  # pragma: no cover - compiled
+    """Scale float32 points (N, 3) into the 64^3 voxel sphere as PCL does and mark the occupancy grid.
+
+    Returns (local (N, 3) float32, lut (66^3,) uint8 flat padded grid (see ``_flat``), maxd float32). ``maxd == 0`` means that
+    all points coincide.
+    """
+    n = points.shape[0]
+    sx = F0
+    sy = F0
+    sz = F0
+    for i in range(n):
+        sx += points[i, 0]
+        sy += points[i, 1]
+        sz += points[i, 2]
+    fn = np.float32(n)
+    cx = sx / fn
+    cy = sy / fn
+    cz = sz / fn
+    local = np.empty((n, 3), dtype=np.float32)
+    maxd = F0
+    for i in range(n):
+        x = points[i, 0] - cx
+        y = points[i, 1] - cy
+        z = points[i, 2] - cz
+        local[i, 0] = x
+        local[i, 1] = y
+        local[i, 2] = z
+        d = np.sqrt((x * x + y * y) + z * z)
+        if d > maxd:
+            maxd = d
+    lut = np.zeros(PAD * PAD * PAD, dtype=np.uint8)
+    if maxd == F0:
+        return local, lut, maxd
+    scale = F1 / maxd * F32
+    for i in range(n):
+        local[i, 0] = local[i, 0] * scale
+        local[i, 1] = local[i, 1] * scale
+        local[i, 2] = local[i, 2] * scale
+        xx = _vox(local[i, 0])
+        yy = _vox(local[i, 1])
+        zz = _vox(local[i, 2])
+        for a in range(xx - 1, xx + 2):
+            for b in range(yy - 1, yy + 2):
+                for c in range(zz - 1, zz + 2):
+                    if 0 <= a < GRID and 0 <= b < GRID and 0 <= c < GRID:
+                        lut[_flat(a, b, c)] = 1
+    return local, lut, maxd
+
+
+@njit(cache=True, inline="always")
+def _flat(x, y, z):  # pragma: no cover - compiled
+    # The grid is padded by one empty voxel on each side: PCL reads outside its 64^3 grid when a
+    # point lands exactly on the sphere's boundary (voxel 64, undefined behaviour); here it is empty.
+    return ((x + 1) * PAD + (y + 1)) * PAD + (z + 1)
+
+
+@njit(cache=True, inline="always")
+def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
+    """PCL's 3-D Bresenham line test: (class 0 in / 1 out / 2 mixed, ratio, n_in, n_visited).
+
+    The major axis has length L; L voxels are visited (start included, end excluded; 1 if L = 0).
+    """
+    dx = x2 - x1
+    dy = y2 - y1
+    dz = z2 - z1
+    sx = -PAD * PAD if dx < 0 else PAD * PAD  # flat-index steps
+    sy = -PAD if dy < 0 else PAD
+    sz = -1 if dz < 0 else 1
+    l_ = abs(dx)
+    m = abs(dy)
+    n = abs(dz)
+    # major axis a (length la, step sa), minor axes b and c
+    if l_ >= m and l_ >= n:
+        la, sa, lb, sb, lc, sc = l_, sx, m, sy, n, sz
+    elif m >= l_ and m >= n:
+        la, sa, lb, sb, lc, sc = m, sy, l_, sx, n, sz
+    else:
+        # PCL's third branch: err_1 drives y, err_2 drives x
+        la, sa, lb, sb, lc, sc = n, sz, m, sy, l_, sx
+    a2 = 2 * la
+    b2 = 2 * lb
+    c2 = 2 * lc
+    e1 = b2 - la
+    e2 = c2 - la
+    idx = _flat(x1, y1, z1)
+    inside = 0
+    for _ in range(1, la):
+        inside += lut[idx]
+        if e1 > 0:
+            idx += sb
+            e1 -= a2
+        if e2 > 0:
+            idx += sc
+            e2 -= a2
+        e1 += b2
+        e2 += c2
+        idx += sa
+    count = max(la, 1)
+    inside += lut[idx]
+    if inside >= count - 1:
+        return 0, F0, inside, count
+    if inside <= 7:
+        return 1, F0, inside, count
+    return 2, np.float32(inside) / np.float32(count), inside, count
+
+
+@njit(cache=True)
+def _round(x):  # pragma: no cover - compiled
+    """pcl_round for float32 x >= 0 (half away from zero); -1 for NaN."""
+    if x != x:
+        return -1
+    return math.floor(x + F05)
+
+
+@njit(cache=True)
+def _angle_bin(c):  # pragma: no cover - compiled
+    return _round(np.float32(math.acos(abs(c))) / PIH * F63)
+
+
+@njit(cache=True)
+def _norm4(x, y, z):  # pragma: no cover - compiled
+    return np.sqrt((x * x + z * z) + y * y)
+
+
+@njit(cache=True)
+def _dot4(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
+    return (ax * bx + az * bz) + ay * by
+
+
+@njit(cache=True)
+def _dist(px, py, pz, qx, qy, qz):  # pragma: no cover - compiled
+    dx = qx - px
+    dy = qy - py
+    dz = qz - pz
+    return np.sqrt((dx * dx + dy * dy) + dz * dz)
+
+
+@njit(cache=True)
+def esf_evaluate(local, lut, triples, fi, ff):  # pragma: no cover - compiled
+    """Evaluate candidate index triples (M, 3) independently (parallelisable; serial here: numba's
+    workqueue threading layer is not safe for concurrent callers, and gains little on 2 cores).
+
+    Row t of ``fi`` (M, 11) int64 gets [accepted, th1, th2, th3, class12, class13, class23, n12,
+    n13, n23, triangle class] and of ``ff`` (M, 8) float32 [d12, d13, d23, ratio12, ratio13,
+    ratio23, d3, d3 weight]. Triangle class: 0 in, 1 out, 2 mixed (as the line classes).
+    """
+    for t in range(triples.shape[0]):
+        fi[t, 0] = 0
+        i1 = triples[t, 0]
+        i2 = triples[t, 1]
+        i3 = triples[t, 2]
+        if i1 == i2 or i1 == i3 or i2 == i3:
+            continue
+        x1 = local[i1, 0]
+        y1 = local[i1, 1]
+        z1 = local[i1, 2]
+        x2 = local[i2, 0]
+        y2 = local[i2, 1]
+        z2 = local[i2, 2]
+        x3 = local[i3, 0]
+        y3 = local[i3, 1]
+        z3 = local[i3, 2]
+        v21x = x2 - x1
+        v21y = y2 - y1
+        v21z = z2 - z1
+        v31x = x3 - x1
+        v31y = y3 - y1
+        v31z = z3 - z1
+        v23x = x2 - x3
+        v23y = y2 - y3
+        v23z = z2 - z3
+        a = _norm4(v21x, v21y, v21z)
+        b = _norm4(v31x, v31y, v31z)
+        c = _norm4(v23x, v23y, v23z)
+        s = (a + b + c) * F05
+        heron = s * (s - a) * (s - b) * (s - c)
+        if heron <= F_AREA:
+            continue
+        v21x /= a
+        v21y /= a
+        v21z /= a
+        v31x /= b
+        v31y /= b
+        v31z /= b
+        v23x /= c
+        v23y /= c
+        v23z /= c
+        th1 = _angle_bin(_dot4(v21x, v21y, v21z, v31x, v31y, v31z))
+        th2 = _angle_bin(_dot4(v23x, v23y, v23z, v31x, v31y, v31z))
+        th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
+        if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
+            continue
+        ff[t, 0] = _dist(x1, y1, z1, x2, y2, z2)
+        ff[t, 1] = _dist(x1, y1, z1, x3, y3, z3)
+        ff[t, 2] = _dist(x2, y2, z2, x3, y3, z3)
+        vx1 = _vox(x1)
+        vy1 = _vox(y1)
+        vz1 = _vox(z1)
+        vx2 = _vox(x2)
+        vy2 = _vox(y2)
+        vz2 = _vox(z2)
+        vx3 = _vox(x3)
+        vy3 = _vox(y3)
+        vz3 = _vox(z3)
+        c1, r1, in1, n1 = _lci(lut, vx1, vy1, vz1, vx2, vy2, vz2)
+        c2, r2, in2, n2 = _lci(lut, vx1, vy1, vz1, vx3, vy3, vz3)
+        c3, r3, in3, n3 = _lci(lut, vx2, vy2, vz2, vx3, vy3, vz3)
+        vs = in1 + in2 + in3
+        pc = n1 + n2 + n3
+        if vs <= 21:
+            cls = 1
+            wt = F0
+        elif pc - vs < 4:
+            cls = 0
+            wt = F1
+        else:
+            cls = 2
+            wt = np.float32(vs) / np.float32(pc)
+        fi[t, 0] = 1
+        fi[t, 1] = th1
+        fi[t, 2] = th2
+        fi[t, 3] = th3
+        fi[t, 4] = c1
+        fi[t, 5] = c2
+        fi[t, 6] = c3
+        fi[t, 7] = n1
+        fi[t, 8] = n2
+        fi[t, 9] = n3
+        fi[t, 10] = cls
+        ff[t, 3] = r1
+        ff[t, 4] = r2
+        ff[t, 5] = r3
+        ff[t, 6] = np.sqrt(np.sqrt(heron))
+        ff[t, 7] = wt
+
+
+@njit(cache=True)
+def esf_accumulate(fi, ff, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
+    """Take evaluated triples in order until ``n_samples`` are accepted (``acc[0]`` counts them, in
+    place), accumulating in PCL's order. Per accepted sample k: ``d2v[3k:3k+3]``, ``wt_d2[3k:3k+3]``
+    (line classes), ``d3v[k]``, ``wt_d3[k]``; ``h_a3`` (3, 64) gets the A3 histograms (in, out, mix)
+    and ``h_ratio`` the mixed-line ratios. Returns the number of triples consumed.
+    """
+    k = acc[0]
+    t = 0
+    m = fi.shape[0]
+    while t < m and k < n_samples:
+        if fi[t, 0] == 1:
+            for j in range(3):
+                d2v[3 * k + j] = ff[t, j]
+                wt_d2[3 * k + j] = fi[t, 4 + j]
+                if fi[t, 4 + j] == 2:
+                    h_ratio[_round(ff[t, 3 + j] * F63)] += F1
+            d3v[k] = ff[t, 6]
+            wt_d3[k] = ff[t, 7]
+            cls = fi[t, 10]
+            h_a3[cls, fi[t, 1]] += np.float32(fi[t, 9]) / F32
+            h_a3[cls, fi[t, 2]] += np.float32(fi[t, 7]) / F32
+            h_a3[cls, fi[t, 3]] += np.float32(fi[t, 8]) / F32
+            k += 1
+        t += 1
+    acc[0] = k
+    return t
+
+
+@njit(cache=True)
+def esf_histogram(n_samples, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover - compiled
+    """The 640-bin float32 ESF from the accepted samples (PCL's block order, weights and sum-to-1)."""
+    maxd2 = F0
+    maxd3 = F0
+    for k in range(n_samples):
+        if d2v[3 * k] > maxd2:
+            maxd2 = d2v[3 * k]
+        if d2v[3 * k + 1] > maxd2:
+            maxd2 = d2v[3 * k + 1]
+        if d2v[3 * k + 2] > maxd2:
+            maxd2 = d2v[3 * k + 2]
+        if d3v[k] > maxd3:
+            maxd3 = d3v[k]
+    h_d3 = np.zeros((3, BINS), dtype=np.float32)  # in, out, mix
+    for k in range(n_samples):
+        idx = _round(d3v[k] / maxd3 * F63)
+        if idx < 0 or idx >= BINS:
+            continue
+        w = wt_d3[k]
+        if w >= 0.999:
+            h_d3[0, idx] += F1
+        elif w <= 0.001:
+            h_d3[1, idx] += F1
+        else:
+            h_d3[2, idx] += F1
+    h_d2 = np.zeros((3, BINS), dtype=np.float32)  # in, out, mix
+    for j in range(3 * n_samples):
+        idx = _round(d2v[j] / maxd2 * F63)
+        h_d2[wt_d2[j], idx] += F1
+    hist = np.empty(10 * BINS, dtype=np.float32)
+    for b in range(BINS):
+        hist[b] = h_a3[0, b] * WEIGHTS[0]
+        hist[BINS + b] = h_a3[1, b] * WEIGHTS[1]
+        hist[2 * BINS + b] = h_a3[2, b] * WEIGHTS[2]
+        hist[3 * BINS + b] = h_d3[0, b] * WEIGHTS[3]
+        hist[4 * BINS + b] = h_d3[1, b] * WEIGHTS[4]
+        hist[5 * BINS + b] = h_d3[2, b] * WEIGHTS[5]
+        hist[6 * BINS + b] = h_d2[0, b] * F05 * WEIGHTS[6]
+        hist[7 * BINS + b] = h_d2[1, b] * WEIGHTS[7]
+        hist[8 * BINS + b] = h_d2[2, b] * WEIGHTS[8]
+        hist[9 * BINS + b] = h_ratio[b] * F05 * WEIGHTS[9]
+    total = F0
+    for b in range(10 * BINS):
+        total += hist[b]
+    for b in range(10 * BINS):
+        hist[b] = hist[b] / total
+    return hist
