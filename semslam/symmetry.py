@@ -70,3 +70,107 @@ class Symmetry:
             return cls(kind=d["kind"], axis_object=d.get("axis_object"), order=d.get("order", 1))
         except (KeyError, TypeError, AttributeError) as exc:
             raise InputError(f"A symmetry record must have a 'kind'. Got {d!r} instead.") from exc
+
+    # -- maths ----------------------------------------------------------------------------------
+    @property
+    def unobservable_axes(self) -> np.ndarray:
+        """Object-frame unit axes about which a rotation is unobservable, shape ``(K, 3)``.
+
+        ``(1, 3)`` (the axis) for a continuous symmetry, ``(0, 3)`` otherwise: a discrete symmetry makes the
+        orientation ambiguous between ``order`` isolated solutions, but each of them is locally observable.
+        """
+        if self.kind == "continuous":
+            return self.axis_object[None, :].copy()
+        return np.zeros((0, 3))
+
+    def group_rotations(self) -> np.ndarray:
+        """The rotations of the discrete group about ``axis_object``, shape ``(order, 3, 3)`` (identity first).
+
+        For ``none`` this is the identity alone; for ``continuous`` it is not defined and raises.
+        """
+        if self.kind == "continuous":
+            raise InputError("Symmetry.group_rotations is not defined for a continuous symmetry (infinite group).")
+        if self.kind == "none":
+            return np.eye(3)[None]
+        angles = 2.0 * np.pi * np.arange(self.order) / self.order
+        return _axis_angle_matrices(self.axis_object, angles)
+
+    def rotation_error_rad(self, R_est: Any, R_true: Any) -> float:
+        """Rotation error (radians, in [0, pi]) between two orientations ``R_parent_object``, modulo the symmetry.
+
+        * ``none``: the angle of ``R_true^T R_est``.
+        * ``discrete``: the smallest such angle over the group, ``min_k angle(R_true^T R_est S_k)``.
+        * ``continuous``: the angle between the symmetry axis mapped by each rotation,
+          ``acos(R_est a . R_true a)``; this equals ``min_theta angle(R_true^T R_est Exp(theta a))``, i.e. the
+          error once the unobservable rotation about the axis is ignored.
+        """
+        from .geometry import check_rotation
+
+        Re = check_rotation("R_est", R_est, caller="Symmetry.rotation_error_rad")
+        Rt = check_rotation("R_true", R_true, caller="Symmetry.rotation_error_rad")
+        if self.kind == "continuous":
+            a = self.axis_object
+            return float(np.arccos(np.clip((Re @ a) @ (Rt @ a), -1.0, 1.0)))
+        M = Rt.T @ Re @ self.group_rotations()  # (order, 3, 3)
+        traces = np.trace(M, axis1=1, axis2=2)
+        return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
+
+    def canonicalize(self, R_parent_object: Any, *, reference: Any = None) -> np.ndarray:
+        """A deterministic representative of the orientations the symmetry makes indistinguishable.
+
+        Parameters
+        ----------
+        R_parent_object : array-like of shape (3, 3)
+            An orientation of the object (object frame -> parent frame).
+        reference : array-like, optional
+            * ``discrete``: a reference rotation ``(3, 3)`` (default identity); the group element
+              ``R S_k`` closest to it (smallest angle; ties go to the lowest ``k``) is returned.
+            * ``continuous``: a parent-frame reference direction ``(3,)`` (default ``+z``, down in NED).
+              Among ``R Exp(theta a)``, the one whose object ``u`` axis (the first object-frame basis vector
+              most perpendicular to ``a``, projected onto the plane normal to ``a``) maps closest to the
+              reference direction is returned. When ``R a`` is parallel to the reference, ``+x`` then
+              ``+y`` of the parent frame are used instead.
+
+        Returns
+        -------
+        ndarray of shape (3, 3)
+            The canonical orientation, equivalent to ``R_parent_object`` under the symmetry. For ``none`` the
+            input itself.
+        """
+        from .geometry import check_rotation
+
+        R = check_rotation("R_parent_object", R_parent_object, caller="Symmetry.canonicalize")
+        if self.kind == "none":
+            return R.copy()
+        if self.kind == "discrete":
+            R_ref = np.eye(3) if reference is None else check_rotation("reference", reference, caller="Symmetry.canonicalize")
+            cands = R @ self.group_rotations()
+            traces = np.trace(R_ref.T @ cands, axis1=1, axis2=2)
+            best = int(np.flatnonzero(traces >= traces.max() - 1e-12)[0])
+            return cands[best]
+        a = self.axis_object
+        # u: object-frame unit vector perpendicular to the axis, chosen deterministically
+        e = np.eye(3)[int(np.argmin(np.abs(a)))]
+        u = e - (e @ a) * a
+        u /= np.linalg.norm(u)
+        v = np.cross(a, u)
+        a_p = R @ a
+        refs = [np.array([0.0, 0.0, 1.0]) if reference is None
+                else as_float_array("reference", reference, (3,), caller="Symmetry.canonicalize"),
+                np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])]
+        for d in refs:
+            d_perp = d - (d @ a_p) * a_p
+            if np.linalg.norm(d_perp) > 1e-6 * max(1.0, float(np.linalg.norm(d))):
+                break
+        # R Exp(theta a) u = cos(theta) R u + sin(theta) R v : maximise the dot product with d
+        theta = float(np.arctan2(d_perp @ (R @ v), d_perp @ (R @ u)))
+        return R @ _axis_angle_matrices(a, np.array([theta]))[0]
+
+
+def _axis_angle_matrices(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotations by ``angles`` (K,) about the unit ``axis`` (3,), shape ``(K, 3, 3)``."""
+    x, y, z = axis
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    s = np.sin(angles)[:, None, None]
+    c = np.cos(angles)[:, None, None]
+    return np.eye(3)[None] + s * K[None] + (1.0 - c) * (K @ K)[None]

@@ -1,0 +1,98 @@
+"""Object pose estimation on simulated scans of the built-in fittings: accuracy and covariance
+consistency (NEES) from a prior pose, the full RANSAC path on the socket, symmetry handling, reliability."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from semslam.detection import Detection
+from semslam.errors import RegistrationError
+from semslam.geometry import rpy_from_rotation, wrap_angle
+from semslam.registration import estimate_object_pose, prepare_pose_model
+from semslam.registration._scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+
+
+@pytest.fixture(scope="module")
+def objects():
+    from semslam.simulation import builtin_objects
+
+    return builtin_objects()
+
+
+@pytest.fixture(scope="module")
+def models(objects):
+    return {label: prepare_pose_model(mesh_model_cloud(o.mesh, seed=1)) for label, o in objects.items()}
+
+
+def _scan(obj, rng, n_points=None):
+    T = resting_scene_pose(obj.resting_poses[0], rng.uniform(0.5, 2.0), seed=rng)
+    n = int(rng.uniform(1000, 5000)) if n_points is None else n_points
+    return T, scan_mesh(obj.mesh, T, n_target_points=n, range_noise_m=0.001, seed=rng)
+
+
+def _errors(obj, est, T):
+    Te = est.T_scanner_object.matrix
+    e = np.concatenate([Te[:3, 3] - T[:3, 3],
+                        wrap_angle(rpy_from_rotation(Te[:3, :3]) - rpy_from_rotation(obj.symmetry.canonicalize(T[:3, :3])))])
+    return obj.symmetry.rotation_error_rad(Te[:3, :3], T[:3, :3]), float(np.linalg.norm(e[:3])), \
+        float(e @ np.linalg.solve(est.covariance_6x6, e))
+
+
+def test_prior_pose_refinement_is_accurate_and_consistent(objects, models):
+    obj, model = objects["ball_valve"], models["ball_valve"]
+    rng = np.random.default_rng(0)
+    rot, tr, nees = [], [], []
+    for _ in range(12):
+        T, pts = _scan(obj, rng)
+        P = np.eye(4)
+        P[:3, :3] = Rotation.from_rotvec(rng.normal(0, np.radians(2), 3)).as_matrix()
+        P[:3, 3] = rng.normal(0, 0.003, 3)
+        est = estimate_object_pose(pts, model, symmetry=obj.symmetry, init_T_scanner_object=T @ P)
+        r, t, n = _errors(obj, est, T)
+        rot.append(r), tr.append(t), nees.append(n)
+        assert est.reliable and est.fitness > 0.9
+    assert np.degrees(np.median(rot)) <= 1.0
+    assert np.median(tr) <= 0.001
+    # chi-square(6) has median 5.35. Only the median is asserted: the mean NEES is NOT yet consistent
+    # (single scans with errors well beyond the Hessian covariance; see the registration report)
+    assert 2.5 <= np.median(nees) <= 9.0, nees
+
+
+def test_full_pipeline_on_socket_continuous_symmetry(objects, models):
+    obj, model = objects["reducing_socket"], models["reducing_socket"]
+    rng = np.random.default_rng(1)
+    for i in range(4):
+        T, pts = _scan(obj, rng, n_points=2000)
+        est = estimate_object_pose(pts, model, symmetry=obj.symmetry, seed=i)
+        r, t, _ = _errors(obj, est, T)
+        assert np.degrees(r) < 10 and t < 0.01, (np.degrees(r), t)
+        # the rotation about the axis is unobservable: one huge eigenvalue, the others small
+        w = np.linalg.eigvalsh(est.covariance_6x6)
+        assert w[-1] >= 1e3 and w[-2] < 1.0
+        Detection("reducing_socket", 0.0, est.T_scanner_object, est.covariance_6x6)  # valid for the filter
+        # canonical: the object's x axis as close as possible to the scanner's +z
+        R = est.T_scanner_object.rotation
+        np.testing.assert_allclose(obj.symmetry.canonicalize(R), R, atol=1e-9)
+
+
+def test_reproducible_with_seed(objects, models):
+    obj, model = objects["elbow"], models["elbow"]
+    _, pts = _scan(obj, np.random.default_rng(2), n_points=1500)
+    a = estimate_object_pose(pts, model, symmetry=obj.symmetry, seed=3)
+    b = estimate_object_pose(pts, model, symmetry=obj.symmetry, seed=3)
+    np.testing.assert_array_equal(a.T_scanner_object.matrix, b.T_scanner_object.matrix)
+    np.testing.assert_array_equal(a.covariance_6x6, b.covariance_6x6)
+
+
+def test_unrelated_cluster_is_unreliable(models):
+    rng = np.random.default_rng(4)
+    blob = rng.normal(0, 0.03, (800, 3)) + [1.0, 0.0, 0.0]
+    est = estimate_object_pose(blob, models["ball_valve"], seed=0)
+    assert not est.reliable
+
+
+def test_too_small_cluster_raises(models):
+    with pytest.raises(RegistrationError, match="min_points"):
+        estimate_object_pose(np.zeros((5, 3)), models["elbow"])
