@@ -1,0 +1,260 @@
+"""Object measurements, their innovation against a landmark, gating and data association.
+
+Measurement model (Himri et al. 2018, eq. 4-5), with two fixes:
+
+* position rows ``z_p = R^T (l_p - p)`` (object position in the vehicle frame), ``H = [-R^T, 0, R^T]``;
+* orientation rows: the paper measures the landmark's world roll-pitch-yaw with ``H = I``. Here the
+  innovation is the world-frame rotation vector ``Log(R_meas R_l^T)`` with ``H = E(rpy_l)``
+  (``w = E d_rpy``), which is wrapped by construction and has no singularity at pitch +-90 degrees
+  (``orientation_innovation="rpy"`` keeps the paper's form, wrapped, with a guard near gimbal lock).
+
+The AHRS attitude error enters the measurement noise (``[-R^T [d]x; I]`` applied to its world-frame
+covariance). Rotations a symmetric object makes unobservable (the class's continuous axis, or any
+direction the detection covariance gives a huge variance) are first aligned (the measured orientation is
+turned about the axis to the closest equivalent) and then projected out of the innovation, so they never
+move the landmark. A discrete symmetry picks the closest of the ``order`` equivalent orientations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+from ..detection import Detection
+from ..geometry import RigidTransform, rpy_from_rotation, rotation_from_rpy, wrap_angle
+from ..symmetry import Symmetry
+from . import _ekf_kernels as kern
+from .ekf import SemanticEkf
+
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectMeasurement:
+    """One detection expressed in the vehicle frame.
+
+    ``noise_cov`` (6, 6) is the covariance of ``[p_vehicle_object (m); rotation vector (rad)]``, the rotation
+    perturbation on the left in the vehicle frame. ``unobservable_axes_vehicle`` (k, 3) are unit axes
+    (vehicle frame) about which the orientation is not measured.
+    """
+
+    label: str
+    stamp_s: float
+    p_vehicle_object_m: np.ndarray
+    R_vehicle_object: np.ndarray
+    noise_cov: np.ndarray
+    unobservable_axes_vehicle: np.ndarray
+    symmetry: Symmetry = field(default_factory=Symmetry)
+    index: int = -1
+
+
+def measurement_from_detection(det: Detection, T_vehicle_scanner: RigidTransform, *, symmetry: Symmetry | None = None,
+                               unobservable_var_rad2: float = 0.25, index: int = -1) -> ObjectMeasurement:
+    """Turn a :class:`~semslam.detection.Detection` (scanner frame, rpy covariance) into an
+    :class:`ObjectMeasurement` (vehicle frame, rotation-vector covariance)."""
+    symmetry = symmetry or Symmetry()
+    T_vo = T_vehicle_scanner @ det.T_sensor_object
+    R_vs = T_vehicle_scanner.rotation
+    E_s = kern.rpy_to_world_rate(det.T_sensor_object.as_rpy())
+    J = np.zeros((6, 6))
+    J[0:3, 0:3] = R_vs
+    J[3:6, 3:6] = R_vs @ E_s
+    C = J @ det.covariance_6x6 @ J.T
+    C = 0.5 * (C + C.T)
+    w, V = np.linalg.eigh(C[3:6, 3:6])
+    axes = [V[:, k] for k in range(3) if w[k] > unobservable_var_rad2]
+    if symmetry.kind == "continuous":
+        axes.append(T_vo.rotation @ symmetry.axis_object)
+    U = _orthonormal(axes)
+    if len(U):  # clamp the huge variance: the direction is projected out of every update anyway
+        Pu = np.eye(3) - U.T @ U
+        C[3:6, 3:6] = Pu @ C[3:6, 3:6] @ Pu + U.T @ U * unobservable_var_rad2
+        C[0:3, 3:6] = C[0:3, 3:6] @ Pu
+        C[3:6, 0:3] = C[0:3, 3:6].T
+    return ObjectMeasurement(det.label, float(det.stamp_s), T_vo.translation_m.copy(), T_vo.rotation.copy(), C, U,
+                             symmetry, index)
+
+
+def _orthonormal(vectors) -> np.ndarray:
+    if not vectors:
+        return np.zeros((0, 3))
+    M = np.asarray(vectors, dtype=float).reshape(-1, 3)
+    U, s, Vt = np.linalg.svd(M, full_matrices=False)
+    return Vt[s > 0.3 * s[0]]
+
+
+def align_rotation(R: np.ndarray, R_ref: np.ndarray, symmetry: Symmetry, axes_world: np.ndarray) -> np.ndarray:
+    """The orientation equivalent to ``R`` (under ``symmetry`` and free rotations about ``axes_world``)
+    closest to ``R_ref``."""
+    if symmetry.kind == "discrete":
+        best, best_tr = R, -np.inf
+        for k in range(symmetry.order):
+            Rk = R @ kern.axis_rotation(symmetry.axis_object, 2.0 * np.pi * k / symmetry.order)
+            tr = np.trace(Rk @ R_ref.T)
+            if tr > best_tr:
+                best, best_tr = Rk, tr
+        R = best
+    if len(axes_world) == 1:
+        u = axes_world[0]
+        R = kern.axis_rotation(u, kern.best_angle_about_axis(R @ R_ref.T, u)) @ R
+    return R
+
+
+@dataclass(frozen=True, eq=False)
+class Innovation:
+    """Innovation of one measurement against one landmark (full rows; ``n_pos = 3`` first rows are position)."""
+
+    idx: np.ndarray  #: global state indices with non-zero Jacobian columns
+    H: np.ndarray  #: (m, len(idx))
+    nu: np.ndarray  #: (m,)
+    R: np.ndarray  #: (m, m) measurement noise
+    S: np.ndarray  #: (m, m) innovation covariance
+    d2_pose: float
+    d2_position: float
+
+    @property
+    def dof_pose(self) -> int:
+        return len(self.nu)
+
+    def rows(self, which: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if which == "pose":
+            return self.H, self.nu, self.R
+        return self.H[:3], self.nu[:3], self.R[:3, :3]
+
+
+def innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurement, R_wv_ahrs: np.ndarray,
+               attitude_cov_world: np.ndarray | None, *, orientation_innovation: str = "rotvec") -> Innovation:
+    """Innovation, Jacobian, noise and squared Mahalanobis distances of ``meas`` against a landmark."""
+    nv = ekf.n_v
+    off = ekf.landmarks[landmark_id].offset
+    idx = np.concatenate([np.arange(nv), off + np.arange(6)])
+    x = ekf.mean(idx)
+    p, l_p, l_rpy = x[0:3], x[nv:nv + 3], x[nv + 3:nv + 6]
+    R = ekf.true_attitude(R_wv_ahrs)
+    d = l_p - p
+    R_l = rotation_from_rpy(*l_rpy)
+    axes_w = meas.unobservable_axes_vehicle @ R.T
+    R_meas = align_rotation(R @ meas.R_vehicle_object, R_l, meas.symmetry, axes_w)
+
+    # basis of the observed rotation directions (world frame)
+    if len(axes_w) == 0:
+        B = np.eye(3)
+    elif len(axes_w) == 1:
+        B = np.linalg.svd(np.eye(3) - np.outer(axes_w[0], axes_w[0]))[0][:, :2]
+    else:
+        B = np.zeros((3, 0))
+    k = B.shape[1]
+    m = 3 + k
+    H = np.zeros((m, len(idx)))
+    Rt = R.T
+    H[0:3, 0:3] = -Rt
+    H[0:3, nv:nv + 3] = Rt
+    if ekf.yaw_bias:
+        H[0:3, 6] = Rt @ kern.skew(_EZ) @ d
+    # noise: detection part (pos in vehicle frame, rotation rotated to world) + AHRS part
+    J = np.zeros((6, 6))
+    J[0:3, 0:3] = np.eye(3)
+    J[3:6, 3:6] = R
+    N6 = J @ meas.noise_cov @ J.T
+    if attitude_cov_world is not None:
+        Je = np.vstack([-Rt @ kern.skew(d), np.eye(3)])
+        N6 = N6 + Je @ attitude_cov_world @ Je.T
+    nu = np.empty(m)
+    nu[0:3] = meas.p_vehicle_object_m - Rt @ d
+    rpy_mode = (orientation_innovation == "rpy" and k == 3 and abs(l_rpy[1]) < np.radians(80.0))
+    if rpy_mode:
+        Einv = kern.world_rate_to_rpy(l_rpy)
+        T = np.zeros((6, 6))
+        T[0:3, 0:3] = np.eye(3)
+        T[3:6, 3:6] = Einv
+        N = T @ N6 @ T.T
+        nu[3:6] = wrap_angle(rpy_from_rotation(R_meas) - l_rpy)
+        H[3:6, nv + 3:nv + 6] = np.eye(3)
+        if ekf.yaw_bias:
+            H[5, 6] = 1.0
+    else:
+        T = np.zeros((m, 6))
+        T[0:3, 0:3] = np.eye(3)
+        T[3:, 3:6] = B.T
+        N = T @ N6 @ T.T
+        if k:
+            nu[3:] = B.T @ kern.so3_log(R_meas @ R_l.T)
+            H[3:, nv + 3:nv + 6] = B.T @ kern.rpy_to_world_rate(l_rpy)
+            if ekf.yaw_bias:
+                H[3:, 6] = B.T @ _EZ
+    N = 0.5 * (N + N.T)
+    S = ekf.innovation_cov(idx, H, N)
+    d2 = kern.mahalanobis2(nu, S)
+    d2p = kern.mahalanobis2(nu[:3], S[:3, :3])
+    return Innovation(idx, H, nu, N, S, d2, d2p)
+
+
+@dataclass(frozen=True)
+class GateThresholds:
+    """Chi-square gates (squared Mahalanobis distance) at probability ``probability``."""
+
+    probability: float = 0.99
+
+    def threshold(self, dof: int) -> float:
+        return float(chi2.ppf(self.probability, dof))
+
+
+def associate(d2: np.ndarray, gate: np.ndarray) -> list[tuple[int, int]]:
+    """Global nearest neighbour: pairs ``(measurement, landmark)`` minimising the summed squared
+    Mahalanobis distance among gated pairs (Hungarian algorithm). ``d2``, ``gate``: (n_meas, n_landmarks)."""
+    if d2.size == 0:
+        return []
+    cost = np.where(gate, d2, 1e12)
+    rows, cols = linear_sum_assignment(cost)
+    return [(int(r), int(c)) for r, c in zip(rows, cols) if gate[r, c]]
+
+
+def associate_jcbb(innovations: dict[tuple[int, int], Innovation], ekf: SemanticEkf, n_meas: int,
+                   gate: np.ndarray, probability: float) -> list[tuple[int, int]]:
+    """Joint compatibility branch and bound (Neira & Tardos 2001) on the position rows.
+
+    Maximises the number of pairings, then minimises the joint squared Mahalanobis distance; a hypothesis
+    is kept only if its stacked innovation passes the joint chi-square test (``3 * pairs`` dof).
+    """
+    best: list = [[], np.inf]
+
+    def joint_d2(pairs):
+        if not pairs:
+            return 0.0
+        idx = np.unique(np.concatenate([innovations[p].idx for p in pairs]))
+        pos = {g: i for i, g in enumerate(idx)}
+        Hs, nus, Rs = [], [], []
+        for p in pairs:
+            inn = innovations[p]
+            Hrow = np.zeros((3, len(idx)))
+            Hrow[:, [pos[g] for g in inn.idx]] = inn.H[:3]
+            Hs.append(Hrow)
+            nus.append(inn.nu[:3])
+            Rs.append(inn.R[:3, :3])
+        H = np.vstack(Hs)
+        from scipy.linalg import block_diag
+
+        S = H @ ekf.cov(idx) @ H.T + block_diag(*Rs)
+        return kern.mahalanobis2(np.concatenate(nus), S)
+
+    def recurse(i, pairs, used):
+        if len(pairs) + (n_meas - i) < len(best[0]):
+            return
+        if i == n_meas:
+            d2 = joint_d2(pairs)
+            if len(pairs) > len(best[0]) or (len(pairs) == len(best[0]) and d2 < best[1]):
+                best[0], best[1] = list(pairs), d2
+            return
+        for j in np.flatnonzero(gate[i]):
+            if j in used:
+                continue
+            cand = pairs + [(i, int(j))]
+            if joint_d2(cand) <= chi2.ppf(probability, 3 * len(cand)):
+                recurse(i + 1, cand, used | {int(j)})
+        recurse(i + 1, pairs, used)
+
+    recurse(0, [], frozenset())
+    return best[0]

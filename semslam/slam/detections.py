@@ -1,0 +1,191 @@
+"""Detection sources for the filter: a truth-based simulator and JSON-lines files.
+
+The truth-based source looks at the ground-truth objects from the true vehicle pose at each scan's end
+stamp (within a cone about the scanner's optical axis and a range window) and reports noisy
+:class:`~semslam.detection.Detection` objects with their covariance, optional misses, misclassifications
+and false detections. The real pipeline's detections (``Detection.to_dict()`` per line, with ``stamp_s``
+and ``scan_id``) plug in through :func:`read_detections_jsonl`; both give ``{scan_id: [Detection, ...]}``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .._atomic import atomic_write_text
+from .._validation import as_rng, check_positive
+from ..detection import Detection
+from ..errors import InputError, SlamError
+from ..geometry import RigidTransform, rotation_from_rpy, rotations_from_rpy, rpy_from_rotation
+from ..simulation.mission import Mission
+from ..symmetry import Symmetry
+from . import _ekf_kernels as kern
+
+
+@dataclass(frozen=True)
+class TruthDetectionConfig:
+    """Truth-based detection source.
+
+    ``fov_rad`` is the full cone angle about the scanner's +z (optical) axis; ``position_sigma_m`` and
+    ``rotation_sigma_rad`` the per-axis pose noise (rotation noise in the scanner frame);
+    ``p_detect`` the probability that a visible object is reported; ``false_rate`` the expected fraction
+    of reported detections that are false (random class and pose in view); ``misclassification_rate``
+    the probability that a true detection carries another class's label. Without scans in the mission,
+    virtual scans are made at ``scan_rate_hz``.
+    """
+
+    fov_rad: float = np.radians(50.0)
+    min_range_m: float = 0.3
+    max_range_m: float = 4.0
+    position_sigma_m: float = 0.03
+    rotation_sigma_rad: float = np.radians(2.0)
+    p_detect: float = 0.9
+    false_rate: float = 0.0
+    misclassification_rate: float = 0.0
+    scan_rate_hz: float = 3.0
+    unobservable_sigma_rad: float = 100.0
+
+    def __post_init__(self) -> None:
+        for name in ("fov_rad", "max_range_m", "position_sigma_m", "rotation_sigma_rad", "scan_rate_hz",
+                     "unobservable_sigma_rad"):
+            check_positive(name, getattr(self, name), caller="TruthDetectionConfig")
+        for name in ("p_detect", "false_rate", "misclassification_rate"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0) or (name == "false_rate" and v >= 1.0):
+                raise InputError(f"The {name!r} field of TruthDetectionConfig must be a probability in [0, 1). Got {v!r} instead.")
+
+    def to_dict(self) -> dict:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+
+def scan_stamps(mission: Mission, scan_rate_hz: float) -> list[tuple[int, float]]:
+    """``(scan_id, end_stamp_s)`` of the mission's scans, or virtual scans at ``scan_rate_hz``."""
+    if mission.scans:
+        return [(s.scan_id, float(s.end_stamp_s)) for s in mission.scans]
+    if mission.truth is None:
+        raise SlamError("The mission has neither scans nor ground truth: no truth-based detections can be made.")
+    t = mission.truth.stamp_s
+    stamps = np.arange(t[0] + 1.0 / scan_rate_hz, t[-1], 1.0 / scan_rate_hz)
+    return [(i, float(s)) for i, s in enumerate(stamps)]
+
+
+def truth_pose_at(mission: Mission, stamp_s: float) -> RigidTransform:
+    """True ``T_world_vehicle`` at ``stamp_s`` (linear interpolation, yaw unwrapped)."""
+    tr = mission.truth
+    rpy = np.unwrap(tr.rpy_rad, axis=0)
+    a = np.array([np.interp(stamp_s, tr.stamp_s, rpy[:, i]) for i in range(3)])
+    return RigidTransform.from_xyz_rpy(tr.interpolate_position(stamp_s)[0], a)
+
+
+def simulate_detections(mission: Mission, config: TruthDetectionConfig | None = None, *, seed=0,
+                        symmetries: dict[str, Symmetry] | None = None) -> dict[int, list[Detection]]:
+    """Truth-based detections ``{scan_id: [Detection]}`` (see module docstring). Seeded."""
+    config = config or TruthDetectionConfig()
+    rng = as_rng(seed, caller="simulate_detections")
+    if mission.truth is None:
+        raise SlamError("simulate_detections needs a mission with ground truth (mission.truth is None).")
+    symmetries = symmetries or {}
+    objects = [o for o in mission.objects if o.in_database]
+    labels = sorted({o.label for o in objects} | set(symmetries))
+    T_vs = mission.T_vehicle_scanner.matrix
+    out: dict[int, list[Detection]] = {}
+    half = config.fov_rad / 2.0
+    scans = scan_stamps(mission, config.scan_rate_hz)
+    stamps = np.array([s for _, s in scans])
+    T_wv = _truth_poses(mission, stamps)
+    T_wo = np.array([o.T_world_object.matrix for o in objects]).reshape(-1, 4, 4)
+    for k, (scan_id, stamp) in enumerate(scans):
+        T_ws = T_wv[k] @ T_vs
+        T_sw = np.eye(4)
+        T_sw[:3, :3] = T_ws[:3, :3].T
+        T_sw[:3, 3] = -T_ws[:3, :3].T @ T_ws[:3, 3]
+        T_so_all = T_sw @ T_wo
+        dets = []
+        for o, T_so in zip(objects, T_so_all):
+            t = T_so[:3, 3]
+            r = float(np.linalg.norm(t))
+            if not (config.min_range_m <= r <= config.max_range_m) or np.arccos(np.clip(t[2] / max(r, 1e-12), -1, 1)) > half:
+                continue
+            if rng.random() >= config.p_detect:
+                continue
+            label = o.label
+            if config.misclassification_rate > 0 and len(labels) > 1 and rng.random() < config.misclassification_rate:
+                label = str(rng.choice([lb for lb in labels if lb != o.label]))
+            dets.append(_noisy(T_so[:3, :3], t, label, symmetries.get(o.label, Symmetry()), config, rng, stamp, scan_id,
+                               {"object_name": o.name}))
+        n_false = 0
+        if config.false_rate > 0 and labels:
+            p = config.false_rate / (1.0 - config.false_rate)
+            n_false = int(rng.binomial(len(dets), min(p, 1.0))) if dets else int(rng.random() < config.false_rate)
+        for _ in range(n_false):
+            r = rng.uniform(config.min_range_m, config.max_range_m)
+            th, ph = rng.uniform(0, half), rng.uniform(-np.pi, np.pi)
+            t = r * np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)])
+            R = rotation_from_rpy(*rng.uniform(-np.pi, np.pi, 3) * np.array([0.5, 0.25, 1.0]))
+            dets.append(_noisy(R, t, str(rng.choice(labels)), Symmetry(),
+                               config, rng, stamp, scan_id, {"object_name": "__false__"}))
+        if dets:
+            out[scan_id] = dets
+    return out
+
+
+def _truth_poses(mission: Mission, stamps: np.ndarray) -> np.ndarray:
+    """True ``T_world_vehicle`` (K, 4, 4) at ``stamps`` (linear interpolation, angles unwrapped)."""
+    tr = mission.truth
+    rpy = np.unwrap(tr.rpy_rad, axis=0)
+    a = np.stack([np.interp(stamps, tr.stamp_s, rpy[:, i]) for i in range(3)], -1)
+    T = np.tile(np.eye(4), (len(stamps), 1, 1))
+    T[:, :3, :3] = rotations_from_rpy(a)
+    T[:, :3, 3] = tr.interpolate_position(stamps)
+    return T
+
+
+def _noisy(R_so: np.ndarray, t_so: np.ndarray, label: str, sym: Symmetry, config: TruthDetectionConfig, rng,
+           stamp: float, scan_id: int, extras: dict) -> Detection:
+    R = R_so
+    if sym.kind == "continuous":
+        R = R @ kern.axis_rotation(sym.axis_object, rng.uniform(-np.pi, np.pi))
+    elif sym.kind == "discrete":
+        R = R @ kern.axis_rotation(sym.axis_object, 2 * np.pi * rng.integers(sym.order) / sym.order)
+    R = kern.so3_exp(rng.normal(0.0, config.rotation_sigma_rad, 3)) @ R
+    t = t_so + rng.normal(0.0, config.position_sigma_m, 3)
+    C_rot = config.rotation_sigma_rad**2 * np.eye(3)
+    if sym.kind == "continuous":
+        u = R @ sym.axis_object
+        C_rot = C_rot + config.unobservable_sigma_rad**2 * np.outer(u, u)
+    rpy = rpy_from_rotation(R)
+    Einv = kern.world_rate_to_rpy(rpy)
+    cov = np.zeros((6, 6))
+    cov[0:3, 0:3] = config.position_sigma_m**2 * np.eye(3)
+    C = Einv @ C_rot @ Einv.T
+    cov[3:6, 3:6] = 0.5 * (C + C.T)
+    return Detection(label=label, score=0.0, T_sensor_object=RigidTransform.from_rotation_translation(R, t),
+                     covariance_6x6=cov, score_kind="truth", stamp_s=stamp, scan_id=scan_id, extras=extras)
+
+
+def read_detections_jsonl(path: str | Path) -> dict[int, list[Detection]]:
+    """Read ``Detection.to_dict()`` JSON lines (each with ``stamp_s`` and ``scan_id``) into ``{scan_id: [...]}``."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"The detections file {str(path)!r} does not exist.")
+    out: dict[int, list[Detection]] = {}
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            d = Detection.from_dict(json.loads(line))
+        except json.JSONDecodeError as exc:
+            raise InputError(f"Line {n} of {str(path)!r} is not JSON: {exc.msg}.") from None
+        if not np.isfinite(d.stamp_s):
+            raise InputError(f"Line {n} of {str(path)!r}: a detection needs a finite 'stamp_s'. Got {d.stamp_s} instead.")
+        out.setdefault(d.scan_id, []).append(d)
+    return out
+
+
+def write_detections_jsonl(path: str | Path, detections_by_scan: dict[int, list[Detection]]) -> None:
+    """Write detections as JSON lines (atomic)."""
+    lines = [json.dumps(d.to_dict()) for sid in sorted(detections_by_scan) for d in detections_by_scan[sid]]
+    atomic_write_text(path, "\n".join(lines) + ("\n" if lines else ""))

@@ -1,0 +1,301 @@
+"""The semantic EKF of Himri et al. (2018), with an exact *compressed* update for large maps.
+
+State ``x = [p (3), v (3), (b_yaw), l_1 (6), ..., l_N (6)]``: vehicle position in the world NED frame (m),
+body-frame velocity (m/s), optionally the AHRS yaw bias (rad; AHRS yaw = true yaw + b), and per landmark its
+world pose ``[x y z roll pitch yaw]`` (m, rad).
+
+Cost that scales. Predictions and updates act on an *active* set ``A`` (the vehicle and the landmarks near
+it); the rest ``B`` of the map is kept in compressed form (Guivant & Nebot 2001, "compressed EKF"): three
+small accumulators ``phi, psi, theta`` (``|A| x |A|``, ``|A| x |A|``, ``|A|``) give at any time
+
+    P_AB = phi P_AB(0),   P_BB = P_BB(0) - P_AB(0)^T psi P_AB(0),   x_B = x_B(0) + P_AB(0)^T theta,
+
+so that one update costs ``O(|A|^2)`` whatever the size of the map and the filter stays *exactly* the full
+EKF. The ``O(n^2)`` "flush" happens only when the active set changes. With every landmark active (the
+default for small maps) this is the ordinary EKF.
+
+Numerics: Joseph-form covariance update on the active block, Cholesky solves (no inverse), symmetrised
+covariance, wrapped landmark angles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SlamError
+from . import _ekf_kernels as kern
+
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass
+class LandmarkInfo:
+    """Book-keeping of one landmark (the state lives in the filter)."""
+
+    label: str
+    offset: int  #: index of its x in the state vector
+    first_seen_s: float
+    last_seen_s: float
+    n_updates: int = 0
+    name: str = ""
+
+
+class SemanticEkf:
+    """Vehicle + landmark EKF. See the module docstring for the state and the compressed update.
+
+    Parameters
+    ----------
+    position_ned_m, velocity_body_mps : array-like of shape (3,)
+        Initial mean.
+    P0_vehicle : array of shape (n_v, n_v)
+        Initial vehicle covariance, ``n_v = 7`` with ``yaw_bias`` else 6.
+    yaw_bias : bool
+        Add the AHRS yaw-bias state.
+    """
+
+    def __init__(self, position_ned_m, velocity_body_mps, P0_vehicle, *, yaw_bias: bool = False) -> None:
+        self.n_v = 7 if yaw_bias else 6
+        self.yaw_bias = yaw_bias
+        P0 = np.asarray(P0_vehicle, dtype=float)
+        if P0.shape != (self.n_v, self.n_v):
+            raise SlamError(f"The 'P0_vehicle' argument of SemanticEkf must have shape ({self.n_v}, {self.n_v}). Got {P0.shape} instead.")
+        self.x = np.zeros(self.n_v)
+        self.x[0:3] = position_ned_m
+        self.x[3:6] = velocity_body_mps
+        self.P = np.ascontiguousarray(0.5 * (P0 + P0.T))
+        self.landmarks: list[LandmarkInfo] = []
+        self._set_active(np.arange(self.n_v))
+
+    # ------------------------------------------------------------------ active set / compression
+    @property
+    def n(self) -> int:
+        return len(self.x)
+
+    @property
+    def compressed(self) -> bool:
+        return len(self._B) > 0
+
+    def _set_active(self, A: np.ndarray) -> None:
+        A = np.asarray(A, dtype=np.intp)
+        self._A = A
+        mask = np.ones(self.n, dtype=bool)
+        mask[A] = False
+        self._B = np.flatnonzero(mask)
+        self._loc = np.full(self.n, -1, dtype=np.intp)
+        self._loc[A] = np.arange(len(A))
+        self.xa = self.x[A].copy()
+        self.Paa = np.ascontiguousarray(self.P[np.ix_(A, A)])
+        nA = len(A)
+        self._phi = np.eye(nA)
+        self._psi = np.zeros((nA, nA))
+        self._theta = np.zeros(nA)
+        self._dirty = False
+
+    def flush(self) -> None:
+        """Write the active block back and apply the deferred update to the passive part (``O(n^2)``)."""
+        A, B = self._A, self._B
+        if len(B) and self._dirty:
+            PAB0 = self.P[np.ix_(A, B)]
+            self.x[B] += PAB0.T @ self._theta
+            w, V = np.linalg.eigh(0.5 * (self._psi + self._psi.T))
+            keep = w > 0
+            W = np.zeros((self.n, int(keep.sum())))
+            W[B] = PAB0.T @ (V[:, keep] * np.sqrt(w[keep]))
+            kern.subtract_outer_inplace(self.P, W)
+            PAB = self._phi @ PAB0
+            self.P[np.ix_(A, B)] = PAB
+            self.P[np.ix_(B, A)] = PAB.T
+        self.P[np.ix_(A, A)] = self.Paa
+        self.x[A] = self.xa
+        self._set_active(A)
+
+    def set_active_landmarks(self, landmark_ids) -> None:
+        """Flush, then make the vehicle and ``landmark_ids`` the active set."""
+        self.flush()
+        idx = [np.arange(self.n_v)] + [self.landmarks[i].offset + np.arange(6) for i in sorted(set(landmark_ids))]
+        self._set_active(np.concatenate(idx))
+
+    def is_active(self, landmark_id: int) -> bool:
+        return self._loc[self.landmarks[landmark_id].offset] >= 0
+
+    # ------------------------------------------------------------------ views of the full state
+    def mean(self, idx) -> np.ndarray:
+        """Current mean of the global state indices ``idx``."""
+        idx = np.asarray(idx, dtype=np.intp)
+        loc = self._loc[idx]
+        out = np.empty(len(idx))
+        a = loc >= 0
+        if a.all():
+            return self.xa[loc]
+        out[a] = self.xa[loc[a]]
+        if (~a).any():
+            b = idx[~a]
+            out[~a] = self.x[b] + self.P[np.ix_(self._A, b)].T @ self._theta
+        return out
+
+    def cov(self, idx) -> np.ndarray:
+        """Current covariance block of the global state indices ``idx`` (exact, also for passive states)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        loc = self._loc[idx]
+        if loc.min() >= 0:
+            return self.Paa[np.ix_(loc, loc)]
+        a = np.flatnonzero(loc >= 0)
+        b = np.flatnonzero(loc < 0)
+        C = np.empty((len(idx), len(idx)))
+        la = loc[a]
+        C[np.ix_(a, a)] = self.Paa[np.ix_(la, la)]
+        if len(b):
+            gb = idx[b]
+            PAb0 = self.P[np.ix_(self._A, gb)]
+            C[np.ix_(b, b)] = self.P[np.ix_(gb, gb)] - PAb0.T @ self._psi @ PAb0
+            Cab = self._phi[la] @ PAb0
+            C[np.ix_(a, b)] = Cab
+            C[np.ix_(b, a)] = Cab.T
+        return C
+
+    def full_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, P)`` of the whole state (flushes; ``O(n^2)``)."""
+        self.flush()
+        return self.x.copy(), self.P.copy()
+
+    def vehicle_position(self) -> np.ndarray:
+        return self.xa[0:3].copy()
+
+    def vehicle_position_cov(self) -> np.ndarray:
+        return self.Paa[0:3, 0:3].copy()
+
+    def landmark_pose(self, i: int) -> np.ndarray:
+        return self.mean(self.landmarks[i].offset + np.arange(6))
+
+    def landmark_cov(self, i: int) -> np.ndarray:
+        return self.cov(self.landmarks[i].offset + np.arange(6))
+
+    def yaw_bias_rad(self) -> float:
+        return float(self.xa[6]) if self.yaw_bias else 0.0
+
+    def true_attitude(self, R_wv_ahrs: np.ndarray) -> np.ndarray:
+        """Vehicle rotation corrected by the estimated yaw bias: ``Rz(-b) R_ahrs``."""
+        if not self.yaw_bias:
+            return R_wv_ahrs
+        return kern.axis_rotation(_EZ, -self.xa[6]) @ R_wv_ahrs
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, dt_s: float, R_wv_ahrs: np.ndarray, *, velocity_rw: float,
+                attitude_cov_world: np.ndarray | None = None, yaw_bias_rw: float = 0.0) -> None:
+        """Constant-velocity prediction over ``dt_s`` with the AHRS attitude as input.
+
+        ``p += R v dt``, ``v`` constant, landmarks static. Process noise: white acceleration of spectral
+        density ``velocity_rw**2`` (m^2/s^3) in the body frame, the AHRS attitude error (world-frame
+        rotation covariance ``attitude_cov_world``, rad^2) mapped through ``[R v dt]x``, and a yaw-bias
+        random walk ``yaw_bias_rw`` (rad/sqrt(s)).
+        """
+        if dt_s <= 0.0:
+            return
+        R = self.true_attitude(R_wv_ahrs)
+        att = np.zeros((3, 3)) if attitude_cov_world is None else attitude_cov_world
+        F = kern.predict_vehicle(self.Paa, self.xa, np.ascontiguousarray(R), float(dt_s), float(velocity_rw) ** 2,
+                                 np.ascontiguousarray(att, dtype=float), self.n_v, float(yaw_bias_rw))
+        if self.compressed:
+            nv = self.n_v
+            self._phi[:nv, :] = F @ self._phi[:nv, :]
+            self._dirty = True
+
+    # ------------------------------------------------------------------ updates
+    def innovation_cov(self, idx, Hc: np.ndarray, Rn: np.ndarray) -> np.ndarray:
+        """``S = H P H^T + R`` for a measurement whose Jacobian has non-zero columns ``idx`` (global)."""
+        S = Hc @ self.cov(idx) @ Hc.T + Rn
+        return 0.5 * (S + S.T)
+
+    def update(self, idx, Hc: np.ndarray, nu: np.ndarray, Rn: np.ndarray) -> None:
+        """Linear(ised) update ``z = H x + n`` with innovation ``nu``; ``H`` non-zero only on ``idx``.
+
+        Every index must be active (see :meth:`set_active_landmarks`). Joseph form on the active block;
+        the passive block is updated exactly through the compression accumulators.
+        """
+        loc = self._loc[np.asarray(idx, dtype=np.intp)]
+        if (loc < 0).any():
+            raise SlamError("SemanticEkf.update touches a passive state; call set_active_landmarks first.")
+        K, S = kern.joseph_update(self.Paa, self.xa, loc, np.ascontiguousarray(Hc, dtype=float),
+                                  np.ascontiguousarray(nu, dtype=float), np.ascontiguousarray(Rn, dtype=float))
+        if self.compressed:
+            HPhi = Hc @ self._phi[loc, :]
+            SinvHPhi = np.linalg.solve(S, np.column_stack([HPhi, nu]))
+            self._theta += HPhi.T @ SinvHPhi[:, -1]
+            psi = self._psi + HPhi.T @ SinvHPhi[:, :-1]
+            self._psi = 0.5 * (psi + psi.T)
+            self._phi -= K @ HPhi
+            self._dirty = True
+        if len(self._A) > self.n_v:
+            self._normalize_angles()
+
+    def _normalize_angles(self) -> None:
+        nv = self.n_v
+        if self.yaw_bias:
+            self.xa[6] = kern_wrap(self.xa[6])
+        nl = (len(self._A) - nv) // 6
+        if nl == 0:
+            return
+        ang = self.xa[nv:].reshape(nl, 6)[:, 3:6]
+        if np.abs(ang).max() <= np.pi / 2 or (np.abs(ang[:, 1]).max() <= np.pi / 2 and np.abs(ang).max() < np.pi):
+            return
+        over = np.abs(ang[:, 1]) > np.pi / 2
+        for j in np.flatnonzero(over):  # pitch beyond +-90 deg: same rotation, pitch mirrored
+            ang[j] = [ang[j, 0] + np.pi, np.pi - ang[j, 1], ang[j, 2] + np.pi]
+            r = nv + 6 * j + 4
+            self.Paa[r, :] *= -1.0
+            self.Paa[:, r] *= -1.0
+            if self.compressed:
+                self._phi[r, :] *= -1.0
+        ang[:] = kern_wrap(ang)
+
+    # ------------------------------------------------------------------ map management
+    def add_landmark(self, pose_xyzrpy: np.ndarray, G_vehicle: np.ndarray, noise_cov: np.ndarray, *,
+                     label: str, stamp_s: float, name: str = "") -> int:
+        """Augment the state with a landmark ``l = g(x_v, z)``.
+
+        ``G_vehicle`` (6, n_v) is ``dg/dx_v`` and ``noise_cov`` (6, 6) the covariance of ``g``'s
+        measurement part; the new landmark gets the full cross-covariance ``G P_v,:`` with the vehicle and
+        every landmark. Returns the landmark id.
+        """
+        self.flush()
+        n, nv = self.n, self.n_v
+        G = np.asarray(G_vehicle, dtype=float)
+        cross = G @ self.P[:nv, :]                           # (6, n)
+        Pll = G @ self.P[:nv, :nv] @ G.T + noise_cov
+        P = np.empty((n + 6, n + 6))
+        P[:n, :n] = self.P
+        P[n:, :n] = cross
+        P[:n, n:] = cross.T
+        P[n:, n:] = 0.5 * (Pll + Pll.T)
+        self.P = P
+        self.x = np.concatenate([self.x, pose_xyzrpy])
+        self.landmarks.append(LandmarkInfo(label, n, stamp_s, stamp_s, 0, name))
+        self._set_active(np.concatenate([self._A, n + np.arange(6)]))
+        return len(self.landmarks) - 1
+
+    def add_prior_landmarks(self, poses_xyzrpy: np.ndarray, covs: np.ndarray, labels, *, stamp_s: float = 0.0,
+                            names=None) -> list[int]:
+        """Add landmarks known a priori (a surveyed map), independent of the vehicle. They start passive."""
+        self.flush()
+        poses = np.asarray(poses_xyzrpy, dtype=float).reshape(-1, 6)
+        m, n = len(poses), self.n
+        P = np.zeros((n + 6 * m, n + 6 * m))
+        P[:n, :n] = self.P
+        for j in range(m):
+            s = n + 6 * j
+            P[s:s + 6, s:s + 6] = covs[j]
+        self.P = P
+        self.x = np.concatenate([self.x, poses.ravel()])
+        ids = []
+        for j in range(m):
+            self.landmarks.append(LandmarkInfo(labels[j], n + 6 * j, stamp_s, stamp_s, 0,
+                                               "" if names is None else names[j]))
+            ids.append(len(self.landmarks) - 1)
+        self._set_active(self._A)
+        return ids
+
+
+def kern_wrap(a):
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi

@@ -1,0 +1,137 @@
+"""Consensus initialisation, class gating, fault cases, detections I/O and the ``semslam slam`` CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from semslam.cli.main import main
+from semslam.geometry import rotation_from_rpy
+from semslam.slam import _ekf_kernels as kern
+from semslam.slam.consensus import ConsensusInitializer, Observation, attitude_distance, quaternion_mean
+from semslam.slam.detections import (TruthDetectionConfig, read_detections_jsonl, simulate_detections,
+                                     write_detections_jsonl)
+from semslam.slam.runner import SlamConfig, run_slam
+from semslam.slam.synthetic import square_mission
+
+
+def test_consensus_rejects_minority_outlier():
+    rng = np.random.default_rng(0)
+    R0 = rotation_from_rpy(0.1, -0.2, 2.0)
+    init = ConsensusInitializer(position_threshold_m=0.3, attitude_threshold=0.01, min_observations=4)
+    inliers = []
+    outlier = Observation("a", 0.5, np.array([1.0, 2.0, 3.0]) + [0.05, 0.0, 0.0], kern.axis_rotation([0, 0, 1], 0.6) @ R0)
+    assert init.add(outlier) is None  # right place, 34 degrees off: fails the attitude test
+    for k in range(4):
+        o = Observation("a", float(k), np.array([1.0, 2.0, 3.0]) + rng.normal(0, 0.03, 3),
+                        kern.so3_exp(rng.normal(0, 0.02, 3)) @ R0)
+        inliers.append(o)
+        res = init.add(o)
+        assert (res is None) == (k < 3)
+    members, pos, R_mean = res
+    assert set(map(id, members)) == set(map(id, inliers))
+    np.testing.assert_allclose(pos, np.mean([o.position_world_m for o in inliers], axis=0))
+    assert np.linalg.norm(kern.so3_log(R_mean @ R0.T)) < 0.03
+    assert init.pools["a"] == [outlier]
+    assert attitude_distance(R0, R0) == pytest.approx(0.0, abs=1e-12)
+    assert attitude_distance(R0, kern.axis_rotation([1, 0, 0], np.pi) @ R0) == pytest.approx(1.0)
+
+
+def test_quaternion_mean_matches_scipy_and_is_sign_invariant():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(2)
+    Rs = [kern.so3_exp(rng.normal(0, 0.2, 3)) @ rotation_from_rpy(0.0, 0.0, 3.1) for _ in range(7)]
+    ref = Rotation.from_matrix(np.array(Rs)).mean().as_matrix()
+    np.testing.assert_allclose(quaternion_mean(Rs), ref, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def mission():
+    return square_mission(seed=4, loops=2)
+
+
+def test_pose_slam_maps_every_object_and_bounds_the_error(mission):
+    res = run_slam(mission, mode="pose", seed=4, symmetries={})
+    mt = res.metrics
+    assert mt["n_objects_mapped"] == 4 and mt["n_landmarks"] == 4
+    assert mt["landmark_position_error_max_m"] < 0.1
+    assert mt["ate_rmse_m"] < 0.05
+    assert mt["landmark_updates"]["pose"] > 20
+    assert mt["fraction_within_3sigma"] > 0.95
+    assert mt["cross_class_updates"] == 0 and mt["wrong_object_updates"] == 0
+    dr = run_slam(mission, mode="dr", seed=4, symmetries={})
+    s_dr = 3 * np.sqrt(dr.position_cov_m2[:, 0, 0] + dr.position_cov_m2[:, 1, 1])   # horizontal 3-sigma
+    s_pose = 3 * np.sqrt(res.position_cov_m2[:, 0, 0] + res.position_cov_m2[:, 1, 1])
+    assert np.all(np.diff(s_dr) > -1e-9) and s_dr[-1] > 1.5 * s_dr[0]  # dead reckoning: the bound only grows
+    assert s_pose[-1] < s_dr[-1] and s_pose[-1] < s_pose.max()        # SLAM: landmarks pull it back
+
+
+def test_class_gate_prevents_cross_class_association(mission):
+    # every detection relabelled to one other class half of the time: still never a cross-class update
+    cfg = SlamConfig.for_mission(mission, detections={"misclassification_rate": 0.3, "p_detect": 1.0})
+    res = run_slam(mission, mode="pose", config=cfg, seed=1, symmetries={})
+    ups = [r for r in res.update_log if r["kind"] == "landmark" and r.get("accepted")]
+    assert ups and all(r["label"] == r["landmark_label"] for r in ups)
+    labels = {lm.landmark_id: lm.label for lm in res.landmarks}
+    assert all(labels[r["landmark"]] == r["label"] for r in ups)
+    # a misclassified detection (label != true class) never updates the landmark of its true object
+    by_obj = {lm.landmark_id: lm.matched_object for lm in res.landmarks}
+    for r in ups:
+        true_label = r["object_name"].rsplit("_", 1)[0]
+        if true_label != r["label"]:
+            assert by_obj[r["landmark"]] != r["object_name"]
+
+
+def test_fault_cases_do_not_diverge():
+    m = square_mission(seed=7, loops=2, dvl_dropout_prob=0.2, dvl_outlier_prob=0.05, dvl_outlier_std_mps=0.3,
+                       extra_objects=1)
+    cfg = SlamConfig.for_mission(m, detections={"false_rate": 0.1, "misclassification_rate": 0.05})
+    for mode in ("dr", "pose", "pose+heading"):
+        res = run_slam(m, mode=mode, config=cfg, seed=7, symmetries={})
+        mt = res.metrics
+        assert np.isfinite(res.position_ned_m).all() and np.isfinite(res.position_cov_m2).all()
+        assert mt["max_position_error_m"] < 0.3, mode
+        assert mt["dvl_rejected"] > 0 and mt["dvl_dropouts"] > 0
+        assert mt["cross_class_updates"] == 0
+        assert np.linalg.eigvalsh(res.position_cov_m2).min() > 0
+
+
+def test_detections_jsonl_round_trip_gives_the_same_run(tmp_path, mission):
+    dets = simulate_detections(mission, TruthDetectionConfig(), seed=3)
+    write_detections_jsonl(tmp_path / "d.jsonl", dets)
+    back = read_detections_jsonl(tmp_path / "d.jsonl")
+    assert sorted(back) == sorted(dets)
+    a = run_slam(mission, dets, mode="pose", seed=0, symmetries={})
+    b = run_slam(mission, back, mode="pose", seed=0, symmetries={})
+    np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-9)
+
+
+def test_cli_slam_end_to_end(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["slam", "synthetic:2", "--mode", "pose", "--out", str(out), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    for name in ("trajectory.csv", "landmarks.csv", "updates.csv", "metrics.json", "config.json"):
+        assert (out / name).is_file()
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["ate_rmse_m"] == pytest.approx(payload["metrics"]["pose"]["ate_rmse_m"])
+    assert metrics["ate_rmse_m"] < 0.05
+    header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert header[:4] == ["stamp_s", "x_m", "y_m", "z_m"]
+    assert main(["slam", str(tmp_path / "missing"), "--out", str(out)]) == 1
+    assert "MISSION" in capsys.readouterr().err
+
+
+def test_montecarlo_reports_anees_band(tmp_path):
+    from semslam.slam.montecarlo import run_montecarlo, write_montecarlo
+
+    res = run_montecarlo(2, modes=("dr", "pose"), seed=0, source="synthetic", loops=1)
+    s = res.summary
+    lo, hi = s["pose"]["band"]
+    assert lo < 3.0 < hi and 0.0 <= s["pose"]["fraction_in_band"] <= 1.0
+    assert res.nees_runs["pose"].shape == (2, len(res.stamps_s))
+    assert s["pose"]["final_3sigma_mean_m"] < s["dr"]["final_3sigma_mean_m"]
+    write_montecarlo(res, tmp_path)
+    assert "| pose |" in (tmp_path / "summary.md").read_text()
