@@ -1,0 +1,290 @@
+"""Classifiers of global descriptors, scikit-learn style.
+
+* :class:`Chi2NearestNeighbor`: the nearest stored view in chi-square distance wins (Himri et al. 2018,
+  sec. 2.1.4.1; PCL's vfh_recognition tutorial), with optional rejection of unknown objects
+  (:mod:`semslam.recognition.rejection`).
+* :class:`SvmClassifier`: an RBF support-vector machine whose (C, gamma) are chosen by the cross-validated
+  grid search of Hsu, Chang & Lin, "A practical guide to support vector classification" (features scaled to
+  [0, 1] first), as in Himri et al. 2018, sec. 2.1.4.2.
+
+Both are scikit-learn estimators (``BaseEstimator`` + ``ClassifierMixin``: ``get_params``, ``clone``,
+``score``): ``__init__`` only stores parameters, ``fit`` returns ``self``, learned attributes end in ``_``
+and ``classes_`` holds the sorted class labels. Bad input raises :class:`~semslam.errors.RecognitionError`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+
+from .._validation import as_float_array, as_rng, check_choice, check_int
+from ..errors import InputError, RecognitionError
+from . import _chi2_kernels
+from .rejection import UNKNOWN_LABEL, RejectionThresholds, calibrate_rejection
+
+__all__ = ["Chi2NearestNeighbor", "SvmClassifier", "chi2_distances"]
+
+
+def _as_histograms(name: str, X: Any, caller: str, n_features: int | None = None) -> np.ndarray:
+    arr = as_float_array(name, X, (None, n_features), caller=caller, error=RecognitionError)
+    if len(arr) == 0:
+        raise RecognitionError(f"The {name!r} argument of {caller} must hold at least one row. Got 0 rows instead.")
+    if (arr < 0).any():
+        raise RecognitionError(
+            f"The {name!r} argument of {caller} must hold histograms (values >= 0). "
+            f"Got a minimum of {arr.min():.6g} instead."
+        )
+    return arr
+
+
+def _as_labels(y: Any, n: int, caller: str) -> np.ndarray:
+    labels = np.asarray(y)
+    if labels.shape != (n,):
+        raise RecognitionError(f"The 'y' argument of {caller} must have shape ({n},). Got {labels.shape} instead.")
+    return labels.astype(str)
+
+
+def chi2_distances(X: Any, Y: Any) -> np.ndarray:
+    """Chi-square distances between histograms, as FLANN / PCL's vfh_recognition tutorial.
+
+    ``d(a, b) = sum_k (a_k - b_k)^2 / (a_k + b_k)`` over the bins with ``a_k + b_k > 0`` (no 1/2
+    factor); equal to ``-sklearn.metrics.pairwise.additive_chi2_kernel(X, Y)``.
+
+    Parameters
+    ----------
+    X : array-like of shape (n, d)
+        Non-negative histograms (ESF, VFH, ...).
+    Y : array-like of shape (m, d)
+        Non-negative histograms with the same number of bins.
+
+    Returns
+    -------
+    ndarray of shape (n, m)
+        ``D[i, j] = d(X[i], Y[j])``, >= 0.
+    """
+    Xa = _as_histograms("X", X, "chi2_distances")
+    Ya = _as_histograms("Y", Y, "chi2_distances", Xa.shape[1])
+    return _chi2_kernels.chi2_distance_matrix(Xa, Ya)
+
+
+class Chi2NearestNeighbor(ClassifierMixin, BaseEstimator):
+    """Nearest-neighbour classifier in chi-square distance, with optional unknown-object rejection.
+
+    Parameters
+    ----------
+    n_neighbors : int, default 1
+        Neighbours that vote; 1 reproduces the papers (the nearest stored view wins). With more, the
+        majority wins and a tie goes to the class of the nearest of the tied neighbours.
+    rejection : {"none", "global", "per_class"}, default "none"
+        Whether ``predict`` may answer ``"unknown"``: a query whose distance to its nearest view exceeds
+        the threshold of the predicted class is rejected. Thresholds are calibrated in ``fit`` from the
+        training set's own leave-one-out distances (see :func:`~semslam.recognition.calibrate_rejection`).
+    reject_quantile, reject_margin : float
+        Threshold = ``reject_margin * quantile(LOO same-class distances, reject_quantile)``.
+
+    Attributes
+    ----------
+    classes_ : ndarray of str, shape (n_classes,)
+    X_fit_ : ndarray of shape (n_views, n_bins)
+        The stored histograms (float64).
+    y_fit_ : ndarray of str, shape (n_views,)
+    rejection_ : RejectionThresholds or None
+    """
+
+    def __init__(self, n_neighbors: int = 1, *, rejection: str = "none", reject_quantile: float = 0.95,
+                 reject_margin: float = 1.0) -> None:
+        self.n_neighbors = n_neighbors
+        self.rejection = rejection
+        self.reject_quantile = reject_quantile
+        self.reject_margin = reject_margin
+
+    def fit(self, X: Any, y: Any) -> Chi2NearestNeighbor:
+        """Store the histograms ``X`` (n_views, n_bins) with their labels ``y`` (n_views,)."""
+        caller = "Chi2NearestNeighbor.fit"
+        check_int("n_neighbors", self.n_neighbors, caller=caller, minimum=1)
+        check_choice("rejection", self.rejection, ("none", "global", "per_class"), caller=caller)
+        self.X_fit_ = _as_histograms("X", X, caller)
+        self.y_fit_ = _as_labels(y, len(self.X_fit_), caller)
+        self.classes_ = np.unique(self.y_fit_)
+        self.n_features_in_ = self.X_fit_.shape[1]
+        self.rejection_: RejectionThresholds | None = None
+        if self.rejection != "none":
+            self.rejection_ = calibrate_rejection(
+                self.X_fit_, self.y_fit_, quantile=self.reject_quantile, margin=self.reject_margin,
+                mode=self.rejection)
+        return self
+
+    def _check_fitted(self, caller: str) -> None:
+        if not hasattr(self, "X_fit_"):
+            raise RecognitionError(f"{caller} was called before fit: this Chi2NearestNeighbor is not fitted yet.")
+
+    def kneighbors(self, X: Any, n_neighbors: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The nearest stored views of each query.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins)
+        n_neighbors : int, optional
+            Defaults to the constructor's ``n_neighbors``; at most the number of stored views.
+
+        Returns
+        -------
+        distances : ndarray of shape (n_queries, n_neighbors)
+            Chi-square distances, ascending.
+        indices : ndarray of int, shape (n_queries, n_neighbors)
+            Rows of the training set (ties: lower index first).
+        """
+        self._check_fitted("Chi2NearestNeighbor.kneighbors")
+        k = self.n_neighbors if n_neighbors is None else n_neighbors
+        check_int("n_neighbors", k, caller="Chi2NearestNeighbor.kneighbors", minimum=1, maximum=len(self.X_fit_))
+        Q = _as_histograms("X", X, "Chi2NearestNeighbor.kneighbors", self.n_features_in_)
+        return _chi2_kernels.smallest_k(_chi2_kernels.chi2_distance_matrix(Q, self.X_fit_), k)
+
+    def predict(self, X: Any) -> np.ndarray:
+        """Class label of each query (``"unknown"`` when rejected), an array of str of shape (n_queries,)."""
+        labels, _ = self._predict_with_distance(X)
+        return labels
+
+    def predict_with_distance(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Labels as :meth:`predict` and the chi-square distance to the nearest stored view (n_queries,)."""
+        return self._predict_with_distance(X)
+
+    def _predict_with_distance(self, X: Any) -> tuple[np.ndarray, np.ndarray]:
+        k = min(self.n_neighbors, len(self.X_fit_)) if hasattr(self, "X_fit_") else self.n_neighbors
+        dist, idx = self.kneighbors(X, k)
+        neighbour_labels = self.y_fit_[idx]
+        if k == 1:
+            labels = neighbour_labels[:, 0].astype(object)
+        else:
+            labels = np.array([_vote(row) for row in neighbour_labels], dtype=object)
+        if self.rejection_ is not None:
+            thresholds = self.rejection_.thresholds_for(labels)
+            labels[dist[:, 0] > thresholds] = UNKNOWN_LABEL
+        return labels.astype(str), dist[:, 0]
+
+
+def _vote(row: np.ndarray) -> str:
+    """Majority label of neighbours sorted by distance; a tie goes to the nearest tied class."""
+    values, counts = np.unique(row, return_counts=True)
+    best = set(values[counts == counts.max()])
+    return next(lab for lab in row if lab in best)
+
+
+class SvmClassifier(ClassifierMixin, BaseEstimator):
+    """RBF SVM with the grid search of Hsu, Chang & Lin (2003).
+
+    Features are scaled to [0, 1] per bin (min-max on the training set, applied unchanged to queries).
+    The grid is ``C = 2**c`` for ``c`` in ``range(*c_log2)`` (inclusive stop) and ``gamma = 2**g`` for ``g``
+    in ``range(*gamma_log2)``; every pair is scored by stratified k-fold cross-validation accuracy
+    (shuffled with ``seed``); the best pair wins, ties going to the smaller C then the smaller gamma (the
+    smoother model). The final SVC is refitted on all the training data.
+
+    Parameters
+    ----------
+    c_log2 : (start, stop, step), default (-5, 15, 2)
+        Exponents of C, stop inclusive: 2^-5, 2^-3, ..., 2^15 as in Hsu et al.
+    gamma_log2 : (start, stop, step), default (-15, 3, 2)
+        Exponents of gamma, stop inclusive: 2^-15, ..., 2^3.
+    cv : int, default 5
+        Folds of the cross-validation (reduced to the smallest class size when that is smaller, >= 2).
+    seed : int or numpy Generator, default 0
+        Shuffles the folds.
+
+    Attributes
+    ----------
+    classes_ : ndarray of str
+    C_, gamma_ : float
+        The chosen parameters.
+    cv_accuracy_ : ndarray of shape (n_C, n_gamma)
+        Mean cross-validated accuracy of every grid point (NaN when the grid was skipped: one class).
+    C_grid_, gamma_grid_ : ndarray
+    scaler_ : sklearn.preprocessing.MinMaxScaler
+    svc_ : sklearn.svm.SVC
+    """
+
+    def __init__(self, *, c_log2: tuple[int, int, int] = (-5, 15, 2),
+                 gamma_log2: tuple[int, int, int] = (-15, 3, 2), cv: int = 5,
+                 seed: int | np.random.Generator = 0) -> None:
+        self.c_log2 = c_log2
+        self.gamma_log2 = gamma_log2
+        self.cv = cv
+        self.seed = seed
+
+    def fit(self, X: Any, y: Any) -> SvmClassifier:
+        """Scale, grid-search (C, gamma) by cross-validation and fit the final SVC."""
+        from sklearn.preprocessing import MinMaxScaler
+        from sklearn.svm import SVC
+
+        caller = "SvmClassifier.fit"
+        Xa = as_float_array("X", X, (None, None), caller=caller, error=RecognitionError)
+        if len(Xa) == 0:
+            raise RecognitionError(f"The 'X' argument of {caller} must hold at least one row. Got 0 rows instead.")
+        labels = _as_labels(y, len(Xa), caller)
+        self.C_grid_ = 2.0 ** _log2_grid("c_log2", self.c_log2, caller)
+        self.gamma_grid_ = 2.0 ** _log2_grid("gamma_log2", self.gamma_log2, caller)
+        check_int("cv", self.cv, caller=caller, minimum=2)
+        rng = as_rng(self.seed, caller=caller)
+        self.classes_, counts = np.unique(labels, return_counts=True)
+        self.n_features_in_ = Xa.shape[1]
+        self.scaler_ = MinMaxScaler().fit(Xa)
+        Xs = self.scaler_.transform(Xa)
+        self.cv_accuracy_ = np.full((len(self.C_grid_), len(self.gamma_grid_)), np.nan)
+        if len(self.classes_) == 1:
+            self.C_, self.gamma_ = float(self.C_grid_[0]), float(self.gamma_grid_[0])
+            self.svc_ = None
+            return self
+        n_splits = min(self.cv, int(counts.min()))
+        if n_splits < 2:
+            raise RecognitionError(
+                f"SvmClassifier.fit needs at least 2 training samples of every class for its cross-validation. "
+                f"Got {int(counts.min())} for class {self.classes_[np.argmin(counts)]!r}."
+            )
+        self.cv_accuracy_ = _grid_cv_accuracy(Xs, labels, self.C_grid_, self.gamma_grid_, n_splits,
+                                              int(rng.integers(2**31 - 1)))
+        best = np.flatnonzero(self.cv_accuracy_.ravel() == self.cv_accuracy_.max())[0]
+        i_c, i_g = np.unravel_index(best, self.cv_accuracy_.shape)
+        self.C_, self.gamma_ = float(self.C_grid_[i_c]), float(self.gamma_grid_[i_g])
+        self.svc_ = SVC(C=self.C_, kernel="rbf", gamma=self.gamma_).fit(Xs, labels)
+        return self
+
+    def predict(self, X: Any) -> np.ndarray:
+        """Class label of each query, an array of str of shape (n_queries,)."""
+        if not hasattr(self, "scaler_"):
+            raise RecognitionError("SvmClassifier.predict was called before fit: this SvmClassifier is not fitted yet.")
+        Q = as_float_array("X", X, (None, self.n_features_in_), caller="SvmClassifier.predict",
+                           error=RecognitionError)
+        if self.svc_ is None:
+            return np.full(len(Q), self.classes_[0]).astype(str)
+        return self.svc_.predict(self.scaler_.transform(Q)).astype(str)
+
+
+def _log2_grid(name: str, spec: Any, caller: str) -> np.ndarray:
+    try:
+        start, stop, step = (int(v) for v in spec)
+    except (TypeError, ValueError):
+        raise InputError(f"The {name!r} argument of {caller} must be (start, stop, step) integers. Got {spec!r} instead.") from None
+    if step <= 0 or stop < start:
+        raise InputError(f"The {name!r} argument of {caller} must have step > 0 and stop >= start. Got {spec!r} instead.")
+    return np.arange(start, stop + 1, step, dtype=float)
+
+
+def _grid_cv_accuracy(Xs: np.ndarray, y: np.ndarray, C_grid: np.ndarray, gamma_grid: np.ndarray,
+                      n_splits: int, random_state: int) -> np.ndarray:
+    """Mean k-fold accuracy of every (C, gamma): RBF kernels precomputed once per fold and gamma."""
+    from scipy.spatial.distance import cdist
+    from sklearn.model_selection import StratifiedKFold
+    from sklearn.svm import SVC
+
+    sq = cdist(Xs, Xs, "sqeuclidean")
+    correct = np.zeros((len(C_grid), len(gamma_grid)))
+    folds = StratifiedKFold(n_splits=n_splits, shuffle=True, random_state=random_state)
+    for train, test in folds.split(Xs, y):
+        for j, gamma in enumerate(gamma_grid):
+            K_train = np.exp(-gamma * sq[np.ix_(train, train)])
+            K_test = np.exp(-gamma * sq[np.ix_(test, train)])
+            for i, C in enumerate(C_grid):
+                pred = SVC(C=C, kernel="precomputed").fit(K_train, y[train]).predict(K_test)
+                correct[i, j] += np.count_nonzero(pred == y[test])
+    return correct / len(y)

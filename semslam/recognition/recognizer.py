@@ -1,0 +1,97 @@
+"""Recognise one segmented cluster against a view database: class (or ``"unknown"``) and matched view.
+
+The matched view is what pose estimation aligns to the cluster (Himri et al. 2019, II.A.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import check_choice
+from ..cloud import PointCloud
+from ..errors import RecognitionError
+from .database import DESCRIPTORS, ViewDatabase, ViewDescriptors, combine_descriptors
+from .matching import Chi2NearestNeighbor
+from .rejection import UNKNOWN_LABEL
+
+__all__ = ["Match", "Recognizer"]
+
+
+@dataclass(frozen=True)
+class Match:
+    """Result of matching one cluster.
+
+    Attributes
+    ----------
+    label : str
+        Class of the nearest view, or ``"unknown"`` when rejected.
+    view_index : int
+        Index of the nearest database view (also when rejected, for diagnostics).
+    nearest_label : str
+        Class of that view.
+    distance : float
+        Chi-square distance to it.
+    threshold : float
+        Rejection threshold applied (``inf`` when rejection is off).
+    descriptors : ViewDescriptors
+        The cluster's ESF and VFH.
+    """
+
+    label: str
+    view_index: int
+    nearest_label: str
+    distance: float
+    threshold: float
+    descriptors: ViewDescriptors
+
+    @property
+    def accepted(self) -> bool:
+        return self.label != UNKNOWN_LABEL
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "view_index": self.view_index, "nearest_label": self.nearest_label,
+                "distance": self.distance, "threshold": self.threshold, "accepted": self.accepted}
+
+
+class Recognizer:
+    """Chi-square nearest-view recognition with unknown rejection calibrated on the database.
+
+    Parameters
+    ----------
+    db : ViewDatabase
+    descriptor : {"esf", "vfh", "esf+vfh"}, default "esf"
+    rejection : {"global", "per_class", "none"}, default "global"
+    reject_quantile, reject_margin : float
+        See :mod:`semslam.recognition.rejection`.
+    """
+
+    def __init__(self, db: ViewDatabase, *, descriptor: str = "esf", rejection: str = "global",
+                 reject_quantile: float = 0.95, reject_margin: float = 1.0) -> None:
+        if not isinstance(db, ViewDatabase):
+            raise RecognitionError(f"The 'db' argument of Recognizer must be a ViewDatabase. Got {type(db).__name__} instead.")
+        self.db = db
+        self.descriptor = check_choice("descriptor", descriptor, DESCRIPTORS, caller="Recognizer")
+        self.classifier = Chi2NearestNeighbor(rejection=rejection, reject_quantile=reject_quantile,
+                                              reject_margin=reject_margin).fit(db.features(descriptor), db.labels)
+
+    @property
+    def thresholds(self):
+        """The calibrated :class:`RejectionThresholds` (None without rejection)."""
+        return self.classifier.rejection_
+
+    def match_descriptors(self, descriptors: ViewDescriptors) -> Match:
+        """Match precomputed descriptors (as :meth:`ViewDatabase.describe` returns)."""
+        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
+        labels, dist = self.classifier.predict_with_distance(x)
+        _, idx = self.classifier.kneighbors(x, 1)
+        i = int(idx[0, 0])
+        nearest = str(self.db.labels[i])
+        thr = self.classifier.rejection_
+        threshold = float("inf") if thr is None else thr.threshold_of(nearest)
+        return Match(str(labels[0]), i, nearest, float(dist[0]), threshold, descriptors)
+
+    def match(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> Match:
+        """Describe ``cloud`` (any frame, viewpoint = sensor origin) as the database's views and match it."""
+        return self.match_descriptors(self.db.describe(cloud, seed=seed))
