@@ -1,0 +1,201 @@
+"""Numba kernels of RMSAC plane fitting. Private: call :func:`semslam.segmentation.fit_plane_rmsac`,
+which validates its input. Every function takes C-contiguous float64 arrays.
+
+Random numbers come from a SplitMix64 generator whose state lives in a 1-element uint64 array, seeded
+by the caller from a numpy Generator: runs are reproducible and independent of numba's global RNG.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+
+
+@njit(cache=True)
+def _splitmix64(state):
+    """Next 64-bit value of SplitMix64 (Steele et al. 2014); advances ``state[0]``."""
+    z = state[0] + _GOLDEN
+    state[0] = z
+    z = (z ^ (z >> _S30)) * _MIX1
+    z = (z ^ (z >> _S27)) * _MIX2
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def _randint(state, n):
+    """Uniform integer in [0, n) (modulo bias < n / 2**64, negligible)."""
+    return np.int64(_splitmix64(state) % np.uint64(n))
+
+
+@njit(cache=True)
+def rmsac_plane(
+    points, threshold, log_one_minus_p, max_iterations, n_pretest, seed, max_degenerate
+):
+    """Randomized MSAC for a plane.
+
+    Cost of a hypothesis ``(n, d)`` (unit normal): ``sum_i min(|n.p_i + d|, T)``, lowest wins. Before
+    scoring, a hypothesis must pass the T(d,d) pre-test: ``n_pretest`` random points (with
+    replacement) all within T; the first hypothesis is always scored. The iteration count adapts as
+    ``k = log(1-p) / log(1 - w**3)`` with w the best inlier fraction (inlier: distance < T). Every
+    non-degenerate hypothesis counts as an iteration, pre-test failure or not, and
+    ``max_iterations`` is always honoured. Degenerate samples (repeated or collinear points) are
+    redrawn, at most ``max_degenerate`` times in total.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    threshold : float, metres
+    log_one_minus_p : float, log(1 - confidence)
+    max_iterations, n_pretest, max_degenerate : int
+    seed : uint64 array of shape (1,), the SplitMix64 state (advanced in place)
+
+    Returns
+    -------
+    coefficients : (4,) float64, unit normal, zeros when no hypothesis was found
+    n_iterations, n_scored, n_degenerate, n_inliers : int
+    """
+    n = points.shape[0]
+    best = np.zeros(4)
+    best_penalty = np.inf
+    best_inliers = 0
+    k = 1.0
+    it = 0
+    n_scored = 0
+    n_degenerate = 0
+    eps = np.finfo(np.float64).eps
+    while it < k and it < max_iterations:
+        i0 = _randint(seed, n)
+        i1 = _randint(seed, n)
+        i2 = _randint(seed, n)
+        ux = points[i1, 0] - points[i0, 0]
+        uy = points[i1, 1] - points[i0, 1]
+        uz = points[i1, 2] - points[i0, 2]
+        vx = points[i2, 0] - points[i0, 0]
+        vy = points[i2, 1] - points[i0, 1]
+        vz = points[i2, 2] - points[i0, 2]
+        a = uy * vz - uz * vy
+        b = uz * vx - ux * vz
+        c = ux * vy - uy * vx
+        cross2 = a * a + b * b + c * c
+        # sin(angle) < 1e-6, or a repeated point: no well-defined plane
+        if (
+            cross2 <= 1e-12 * (ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)
+            or cross2 == 0.0
+        ):
+            n_degenerate += 1
+            if n_degenerate > max_degenerate:
+                break
+            continue
+        norm = np.sqrt(cross2)
+        a /= norm
+        b /= norm
+        c /= norm
+        d = -(a * points[i0, 0] + b * points[i0, 1] + c * points[i0, 2])
+        if n_scored > 0 and n_pretest > 0:
+            passed = True
+            for _ in range(n_pretest):
+                j = _randint(seed, n)
+                if abs(a * points[j, 0] + b * points[j, 1] + c * points[j, 2] + d) > threshold:
+                    passed = False
+                    break
+            if not passed:
+                it += 1
+                continue
+        penalty = 0.0
+        count = 0
+        complete = True
+        for i in range(n):
+            dist = abs(a * points[i, 0] + b * points[i, 1] + c * points[i, 2] + d)
+            if dist < threshold:
+                penalty += dist
+                count += 1
+            else:
+                penalty += threshold
+            if penalty >= best_penalty:  # cannot win any more: stop scoring (exact)
+                complete = False
+                break
+        n_scored += 1
+        it += 1
+        if complete and penalty < best_penalty:
+            best_penalty = penalty
+            best_inliers = count
+            best[0] = a
+            best[1] = b
+            best[2] = c
+            best[3] = d
+            w = count / n
+            p_no_outliers = 1.0 - w * w * w
+            p_no_outliers = min(max(p_no_outliers, eps), 1.0 - eps)
+            k = log_one_minus_p / np.log(p_no_outliers)
+    return best, it, n_scored, n_degenerate, best_inliers
+
+
+@njit(cache=True)
+def plane_distances(points, coefficients):
+    """Absolute distances ``|a x + b y + c z + d|`` of (N, 3) points to a unit-normal plane, (N,)."""
+    n = points.shape[0]
+    out = np.empty(n)
+    a, b, c, d = coefficients[0], coefficients[1], coefficients[2], coefficients[3]
+    for i in range(n):
+        out[i] = abs(a * points[i, 0] + b * points[i, 1] + c * points[i, 2] + d)
+    return out
+
+
+@njit(cache=True)
+def mean_and_covariance(points, indices):
+    """Centroid (3,) and covariance (3, 3) (divided by M) of ``points[indices]``; two passes for
+    accuracy far from the origin. ``indices`` (M,) int64, M >= 1."""
+    m = indices.shape[0]
+    mean = np.zeros(3)
+    for r in range(m):
+        i = indices[r]
+        mean[0] += points[i, 0]
+        mean[1] += points[i, 1]
+        mean[2] += points[i, 2]
+    mean /= m
+    cov = np.zeros((3, 3))
+    for r in range(m):
+        i = indices[r]
+        dx = points[i, 0] - mean[0]
+        dy = points[i, 1] - mean[1]
+        dz = points[i, 2] - mean[2]
+        cov[0, 0] += dx * dx
+        cov[0, 1] += dx * dy
+        cov[0, 2] += dx * dz
+        cov[1, 1] += dy * dy
+        cov[1, 2] += dy * dz
+        cov[2, 2] += dz * dz
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]
+    return mean, cov / m
+
+
+@njit(cache=True)
+def within(distances, threshold):
+    """Sorted indices (int64) of the distances strictly below ``threshold``."""
+    n = distances.shape[0]
+    count = 0
+    for i in range(n):
+        if distances[i] < threshold:
+            count += 1
+    out = np.empty(count, np.int64)
+    j = 0
+    for i in range(n):
+        if distances[i] < threshold:
+            out[j] = i
+            j += 1
+    return out
+
+
+@njit(cache=True)
+def mean_and_covariance_all(points):
+    """:func:`mean_and_covariance` of all the (N, 3) points."""
+    return mean_and_covariance(points, np.arange(points.shape[0]))

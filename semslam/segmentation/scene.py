@@ -1,0 +1,260 @@
+"""The segmentation stage of the recognition pipeline (Rusu et al. 2009, as in the seed papers):
+optional voxel grid, removal of the dominant plane(s) by RMSAC, Euclidean clustering of the rest."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .._validation import check_int, check_positive
+from ..cloud import PointCloud
+from ..errors import InputError, SegmentationError
+from .clusters import extract_euclidean_clusters
+from .plane import PlaneModel, remove_dominant_planes
+from .voxel import voxel_grid
+
+__all__ = ["SegmentationConfig", "SegmentationResult", "segment_scene"]
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """Parameters of :func:`segment_scene`, validated on construction.
+
+    Defaults suit our laser scans of pipe fittings (10-40 cm) on a tank floor, seen from 1-3 m:
+
+    * ``voxel_leaf_m = 0.005``: 5 mm keeps the fittings' shape for ESF/VFH and evens out the scan
+      density (closer surfaces are sampled more densely); ``None`` disables the voxel grid.
+    * ``distance_threshold_m = 0.01``: floor points within 1 cm are removed (scanner noise is a few
+      mm; a larger value eats the bottom of objects resting on the floor).
+    * ``cluster_tolerance_m = 0.02``: 4 voxels; parts of one object closer than 2 cm merge.
+    * ``min_cluster_size = 50``: at 5 mm, 50 points is ~12 cm^2 of surface, below which ESF/VFH are
+      unreliable; ``max_cluster_size = 25000`` is ~0.6 m^2 at 5 mm, larger clusters are walls or
+      structure, not fittings.
+    * ``max_planes = 1``: the floor; raise it to also remove tank walls. A further plane is removed
+      only if it holds at least ``min_plane_inliers`` points (default 5 % of the cloud).
+    """
+
+    voxel_leaf_m: float | None = 0.005
+    distance_threshold_m: float = 0.01
+    max_planes: int = 1
+    min_plane_inliers: int | None = None
+    plane_confidence: float = 0.99
+    plane_max_iterations: int = 1000
+    plane_n_pretest: int = 1
+    cluster_tolerance_m: float = 0.02
+    min_cluster_size: int = 50
+    max_cluster_size: int | None = 25000
+
+    def __post_init__(self) -> None:
+        c = "SegmentationConfig"
+        if self.voxel_leaf_m is not None:
+            check_positive("voxel_leaf_m", self.voxel_leaf_m, caller=c)
+        check_positive("distance_threshold_m", self.distance_threshold_m, caller=c)
+        check_int("max_planes", self.max_planes, caller=c, minimum=0)
+        if self.min_plane_inliers is not None:
+            check_int("min_plane_inliers", self.min_plane_inliers, caller=c, minimum=3)
+        check_positive("plane_confidence", self.plane_confidence, caller=c)
+        if not self.plane_confidence < 1:
+            raise InputError(
+                f"The 'plane_confidence' argument of {c} must be in (0, 1). "
+                f"Got {self.plane_confidence!r} instead."
+            )
+        check_int("plane_max_iterations", self.plane_max_iterations, caller=c, minimum=1)
+        check_int("plane_n_pretest", self.plane_n_pretest, caller=c, minimum=0)
+        check_positive("cluster_tolerance_m", self.cluster_tolerance_m, caller=c)
+        lo = check_int("min_cluster_size", self.min_cluster_size, caller=c, minimum=1)
+        if self.max_cluster_size is not None:
+            hi = check_int("max_cluster_size", self.max_cluster_size, caller=c, minimum=1)
+            if hi < lo:
+                raise InputError(
+                    f"The 'max_cluster_size' argument of {c} must be >= min_cluster_size={lo}. "
+                    f"Got {hi} instead."
+                )
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentationResult:
+    """Output of :func:`segment_scene`.
+
+    Attributes
+    ----------
+    segmented_cloud : PointCloud
+        The cloud the planes and clusters were computed on: the voxel centroids (frame and viewpoint
+        of the input; intensity averaged per voxel; normals and other fields dropped), or the input
+        itself without a voxel grid.
+    planes : list of PlaneModel
+        Removed planes (coefficients in the input frame, ``n_inliers`` counted in ``segmented_cloud``).
+    cluster_indices : list of ndarray of int64
+        Sorted indices into ``segmented_cloud``, one array per cluster, largest first.
+    clusters : list of PointCloud
+        ``segmented_cloud.select(indices)`` for each cluster.
+    point_voxel : ndarray of shape (N_input,) or None
+        Row of ``segmented_cloud`` each input point was averaged into (None without voxel grid).
+    n_input_points : int
+    n_after_planes : int
+        Points of ``segmented_cloud`` left for clustering.
+    timings_ms : dict of str to float
+        Wall time of each stage (``voxel``, ``planes``, ``clusters``, ``total``), milliseconds.
+    notes : list of str
+        Why a stage removed nothing or the result is empty (never silent).
+    """
+
+    segmented_cloud: PointCloud
+    planes: list[PlaneModel]
+    cluster_indices: list[np.ndarray]
+    clusters: list[PointCloud]
+    point_voxel: np.ndarray | None
+    n_input_points: int
+    n_after_planes: int
+    timings_ms: dict[str, float]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def cluster_sizes(self) -> list[int]:
+        """Number of points of each cluster, largest first."""
+        return [len(c) for c in self.cluster_indices]
+
+    @property
+    def n_clusters(self) -> int:
+        return len(self.cluster_indices)
+
+    def input_indices(self, cluster: int) -> np.ndarray:
+        """Sorted indices into the INPUT cloud of the points of cluster ``cluster`` (through the voxel map)."""
+        idx = self.cluster_indices[cluster]
+        if self.point_voxel is None:
+            return idx
+        mask = np.zeros(self.segmented_cloud.n_points, bool)
+        mask[idx] = True
+        return np.flatnonzero(mask[self.point_voxel]).astype(np.int64)
+
+    def to_dict(self) -> dict:
+        return {
+            "n_input_points": self.n_input_points,
+            "n_segmented_points": self.segmented_cloud.n_points,
+            "n_after_planes": self.n_after_planes,
+            "planes": [p.to_dict() for p in self.planes],
+            "cluster_sizes": self.cluster_sizes,
+            "timings_ms": dict(self.timings_ms),
+            "notes": list(self.notes),
+        }
+
+
+def segment_scene(
+    cloud: PointCloud,
+    config: SegmentationConfig | None = None,
+    *,
+    seed: int | np.random.Generator | None = 0,
+) -> SegmentationResult:
+    """Segment a scan into object clusters: voxel grid, dominant plane(s) removal, Euclidean clusters.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+        The scene, any frame (plane coefficients are returned in it); typically the scanner frame.
+    config : SegmentationConfig, optional
+        Stage parameters; default ``SegmentationConfig()``.
+    seed : int, numpy Generator or None
+        Randomness of the plane fitting (RMSAC); an int makes the result reproducible.
+
+    Returns
+    -------
+    SegmentationResult
+        Never raises on a scene that is too small or degenerate: the planes or clusters are then
+        empty and ``notes`` says why.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise InputError(
+            f"The 'cloud' argument of segment_scene must be a PointCloud. Got {type(cloud).__name__} instead."
+        )
+    cfg = SegmentationConfig() if config is None else config
+    if not isinstance(cfg, SegmentationConfig):
+        raise InputError(
+            f"The 'config' argument of segment_scene must be a SegmentationConfig. "
+            f"Got {type(config).__name__} instead."
+        )
+    notes: list[str] = []
+    timings: dict[str, float] = {}
+    t_start = t0 = time.perf_counter()
+
+    point_voxel = None
+    seg_cloud = cloud
+    if cfg.voxel_leaf_m is not None and cloud.n_points:
+        grid = voxel_grid(cloud.points_xyz_m, cfg.voxel_leaf_m)
+        point_voxel = grid.point_voxel
+        intensity = None
+        if cloud.intensity is not None:
+            intensity = (
+                np.bincount(grid.point_voxel, weights=cloud.intensity, minlength=grid.n_voxels)
+                / grid.counts
+            )
+        seg_cloud = PointCloud(
+            grid.points_xyz_m,
+            intensity=intensity,
+            viewpoint_xyz_m=cloud.viewpoint_xyz_m,
+            frame_id=cloud.frame_id,
+        )
+    timings["voxel"] = (time.perf_counter() - t0) * 1e3
+
+    t0 = time.perf_counter()
+    pts = seg_cloud.points_xyz_m
+    planes: list[PlaneModel] = []
+    remaining = np.arange(len(pts), dtype=np.int64)
+    if len(pts) == 0:
+        notes.append("empty input cloud: nothing to segment")
+    elif cfg.max_planes > 0:
+        try:
+            removal = remove_dominant_planes(
+                pts,
+                distance_threshold_m=cfg.distance_threshold_m,
+                max_planes=cfg.max_planes,
+                min_inliers=cfg.min_plane_inliers,
+                confidence=cfg.plane_confidence,
+                max_iterations=cfg.plane_max_iterations,
+                n_pretest=cfg.plane_n_pretest,
+                seed=seed,
+            )
+            planes, remaining = removal.planes, removal.remaining_indices
+            if len(planes) < cfg.max_planes:
+                notes.append(
+                    f"removed {len(planes)} of max {cfg.max_planes} planes: {removal.stop_reason}"
+                )
+        except SegmentationError as exc:
+            notes.append(f"no plane removed: {exc}")
+    timings["planes"] = (time.perf_counter() - t0) * 1e3
+
+    t0 = time.perf_counter()
+    cluster_indices: list[np.ndarray] = []
+    if len(pts) and len(remaining) == 0:
+        notes.append("no points left after plane removal: no clusters")
+    elif len(remaining):
+        local = extract_euclidean_clusters(
+            pts[remaining],
+            tolerance_m=cfg.cluster_tolerance_m,
+            min_size=cfg.min_cluster_size,
+            max_size=cfg.max_cluster_size,
+        )
+        cluster_indices = [remaining[c] for c in local]
+        if not cluster_indices:
+            notes.append(
+                f"no cluster of {cfg.min_cluster_size} to {cfg.max_cluster_size} points among the "
+                f"{len(remaining)} points left after plane removal"
+            )
+    clusters = [seg_cloud.select(idx) for idx in cluster_indices]
+    timings["clusters"] = (time.perf_counter() - t0) * 1e3
+    timings["total"] = (time.perf_counter() - t_start) * 1e3
+    return SegmentationResult(
+        seg_cloud,
+        planes,
+        cluster_indices,
+        clusters,
+        point_voxel,
+        cloud.n_points,
+        len(remaining),
+        timings,
+        notes,
+    )

@@ -1,0 +1,181 @@
+"""segment_scene and ``semslam segment``: a synthetic tank scene with known objects, bad input, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from semslam.cli.main import main
+from semslam.cloud import PointCloud
+from semslam.errors import InputError
+from semslam.segmentation import SegmentationConfig, segment_scene
+
+
+def tank_scene(seed=0) -> tuple[PointCloud, list[int]]:
+    """Scanner frame (z down): a floor at z = 2 m seen from above, a 20 cm box and a 12 cm ball on it.
+
+    Returns the cloud and, per point, the ground-truth object id (0 floor, 1 box, 2 ball).
+    """
+    rng = np.random.default_rng(seed)
+    floor = np.c_[rng.uniform(-0.6, 0.6, (12000, 2)), 2.0 + rng.normal(0, 0.001, 12000)]
+    lo = np.array([-0.3, -0.3, 1.78])
+    box = rng.uniform(lo, [-0.1, -0.1, 1.98], (3000, 3))
+    face = rng.integers(
+        0, 3, 3000
+    )  # the three faces the scanner sees: x = -0.3, y = -0.3, z = 1.78
+    box[np.arange(3000), face] = lo[face]
+    direction = rng.normal(size=(2000, 3))
+    ball = [0.3, 0.2, 1.86] + 0.06 * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    pts = np.r_[floor, box, ball]
+    labels = np.r_[np.zeros(len(floor)), np.ones(len(box)), np.full(len(ball), 2)].astype(int)
+    order = rng.permutation(len(pts))
+    return PointCloud(
+        pts[order], intensity=labels[order].astype(float), frame_id="scanner"
+    ), labels[order]
+
+
+def test_segment_scene_finds_the_objects():
+    cloud, labels = tank_scene()
+    res = segment_scene(cloud, SegmentationConfig(voxel_leaf_m=0.01, min_cluster_size=30), seed=0)
+    assert len(res.planes) == 1
+    np.testing.assert_allclose(
+        res.planes[0].coefficients, [0, 0, -1, 2.0], atol=2e-3
+    )  # scanner on + side
+    assert res.n_clusters == 2 and res.cluster_sizes == sorted(res.cluster_sizes, reverse=True)
+    assert (
+        res.segmented_cloud.n_points < cloud.n_points and res.segmented_cloud.frame_id == "scanner"
+    )
+    for i, want in enumerate([1, 2]):  # the box is larger than the ball
+        inputs = res.input_indices(i)
+        # voxels mix a few floor points near the box's base; the cluster is the object
+        assert np.mean(labels[inputs] == want) > 0.97
+        assert np.count_nonzero(labels[inputs] == want) > 0.9 * np.count_nonzero(labels == want)
+        np.testing.assert_array_equal(
+            res.clusters[i].points_xyz_m, res.segmented_cloud.points_xyz_m[res.cluster_indices[i]]
+        )
+    assert set(res.timings_ms) == {"voxel", "planes", "clusters", "total"} and res.notes == []
+    again = segment_scene(cloud, SegmentationConfig(voxel_leaf_m=0.01, min_cluster_size=30), seed=0)
+    assert again.cluster_sizes == res.cluster_sizes  # seeded: reproducible
+
+
+def test_without_voxel_grid_indices_are_into_the_input():
+    cloud, labels = tank_scene(1)
+    res = segment_scene(
+        cloud, SegmentationConfig(voxel_leaf_m=None, min_cluster_size=100, max_cluster_size=None)
+    )
+    assert res.segmented_cloud is cloud and res.point_voxel is None
+    assert res.n_clusters == 2
+    assert np.all(labels[res.cluster_indices[0]] == 1) and np.all(
+        labels[res.cluster_indices[1]] == 2
+    )
+    np.testing.assert_array_equal(res.input_indices(1), res.cluster_indices[1])
+
+
+def test_degenerate_scenes_give_empty_results_that_say_why():
+    res = segment_scene(PointCloud(np.zeros((0, 3))))
+    assert res.n_clusters == 0 and "empty input" in res.notes[0]
+    flat = np.c_[np.random.default_rng(0).uniform(size=(500, 2)), np.zeros(500)]
+    res = segment_scene(PointCloud(flat), SegmentationConfig(voxel_leaf_m=None))
+    assert res.n_clusters == 0 and "no points left after plane removal" in res.notes[-1]
+    line = np.c_[np.linspace(0, 1, 200), np.zeros(200), np.zeros(200)]
+    res = segment_scene(PointCloud(line), SegmentationConfig(voxel_leaf_m=None))
+    assert res.planes == [] and "collinear" in res.notes[0] and res.cluster_sizes == [200]
+    res = segment_scene(
+        PointCloud(np.ones((40, 3))), SegmentationConfig(voxel_leaf_m=0.01, min_cluster_size=1)
+    )
+    assert "at least 3 points" in res.notes[0] and res.cluster_sizes == [1]
+    scattered = np.random.default_rng(1).uniform(-10, 10, (300, 3))
+    res = segment_scene(PointCloud(scattered), SegmentationConfig(voxel_leaf_m=None))
+    assert res.n_clusters == 0 and "no cluster of 50 to 25000 points" in res.notes[-1]
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"voxel_leaf_m": 0.0}, "voxel_leaf_m"),
+        ({"distance_threshold_m": -1}, "distance_threshold_m"),
+        ({"max_planes": -1}, "max_planes"),
+        ({"min_cluster_size": 10, "max_cluster_size": 5}, "max_cluster_size"),
+        ({"plane_confidence": 1.5}, "plane_confidence"),
+        ({"min_plane_inliers": 2}, "min_plane_inliers"),
+    ],
+)
+def test_config_is_validated(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        SegmentationConfig(**kwargs)
+
+
+def test_segment_scene_rejects_wrong_types():
+    with pytest.raises(InputError, match="PointCloud"):
+        segment_scene(np.zeros((10, 3)))
+    with pytest.raises(InputError, match="SegmentationConfig"):
+        segment_scene(PointCloud(np.zeros((3, 3))), {"voxel_leaf_m": 0.01})
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    from semslam.io import write_point_cloud
+
+    path = tmp_path_factory.mktemp("scene") / "tank.pcd"
+    write_point_cloud(path, tank_scene()[0])
+    return path
+
+
+def test_cli_json_and_out(scene_file, tmp_path, capsys):
+    out = tmp_path / "clusters"
+    code = main(
+        [
+            "segment",
+            str(scene_file),
+            "--voxel",
+            "0.01",
+            "--min-cluster-size",
+            "30",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
+    assert code == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert len(payload["planes"]) == 1 and payload["planes"][0]["n_inliers"] > 5000
+    np.testing.assert_allclose(payload["planes"][0]["coefficients"], [0, 0, -1, 2.0], atol=2e-3)
+    sizes = payload["cluster_sizes"]
+    assert len(sizes) == 2 and sizes == sorted(sizes, reverse=True)
+    assert set(payload["timings_ms"]) == {"voxel", "planes", "clusters", "total"}
+    assert payload["seed"] == 3 and payload["config"]["voxel_leaf_m"] == 0.01
+    from semslam.io import read_point_cloud
+
+    written = [read_point_cloud(f) for f in payload["files"]]
+    assert [c.n_points for c in written] == sizes
+    assert json.loads((out / "segmentation.json").read_text())["cluster_sizes"] == sizes
+
+
+def test_cli_text_output(scene_file, capsys):
+    assert main(["segment", str(scene_file), "--voxel", "0", "--max-cluster-size", "0"]) == 0
+    text = capsys.readouterr().out
+    assert "plane 0:" in text and "2 clusters:" in text and "time: voxel" in text
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["--voxel", "-1"], "--voxel"),
+        (["--cluster-tolerance", "0"], "cluster_tolerance_m"),
+        (["--min-cluster-size", "10", "--max-cluster-size", "5"], "max_cluster_size"),
+        (["--seed", "-1"], "--seed"),
+    ],
+)
+def test_cli_bad_options_exit_1(scene_file, capsys, argv, match):
+    assert main(["segment", str(scene_file), *argv]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("semslam: error:") and match in err
+
+
+def test_cli_missing_file(tmp_path, capsys):
+    assert main(["segment", str(tmp_path / "nope.pcd")]) == 1
+    assert "nope.pcd" in capsys.readouterr().err
