@@ -275,7 +275,7 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
     rows = []
     for mode, m in metrics.items():
         rows.append([mode, m.get("ate_rmse_m"), m.get("final_position_error_m"), m.get("max_position_error_m"),
-                     m.get("anees", m.get("mean_nees")), m.get("n_landmarks", "")])
+                     m.get("nees_position_mean"), m.get("n_landmarks", "")])
     fig, ax = plt.subplots(figsize=(8.5, 7))
     runs_plot = dict(trajs)
     if truth is not None:

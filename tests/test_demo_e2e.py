@@ -1,0 +1,82 @@
+"""End to end: `semslam demo --quick` in a temporary directory writes a complete, readable run."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "run"
+    proc = subprocess.run([sys.executable, "-m", "semslam.cli.main", "demo", "--quick", "--out", str(out),
+                           "--no-progress", "--seed", "3"], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc
+
+
+def test_prints_summary_and_report_path_last(quick_run):
+    out, proc = quick_run
+    lines = proc.stdout.strip().splitlines()
+    assert lines[-1] == f"report: {out / 'report.html'}"
+    assert any(line.startswith("dr ") for line in lines) and any(line.startswith("pose ") for line in lines)
+
+
+def test_every_output_exists(quick_run):
+    out, _ = quick_run
+    for name in ("config.json", "db.npz", "detections.jsonl", "recognition.json", "metrics.json", "report.html",
+                 "mission/mission.json", "evaluation/loo_esf_svm.json", "evaluation/loo_vfh_svm.json",
+                 "fig3_scan.npz", "consensus.json"):
+        assert (out / name).is_file(), name
+    for mode in ("dr", "position", "pose", "pose_heading"):
+        for name in ("trajectory.csv", "landmarks.csv", "updates.csv", "metrics.json"):
+            assert (out / "slam" / mode / name).is_file(), f"slam/{mode}/{name}"
+    lines = (out / "detections.jsonl").read_text().strip().splitlines()
+    assert lines and all("scan_id" in json.loads(line) for line in lines)
+
+
+def test_every_figure_is_embedded(quick_run):
+    out, _ = quick_run
+    pngs = sorted(p.name for p in (out / "figures").glob("*.png"))
+    assert {"table_esf_svm.png", "table_vfh_svm.png", "fig3_scan.png", "fig4_trajectories.png",
+            "fig6_error_bounds.png", "consensus.png", "nees.png", "pose_errors.png"} <= set(pngs)
+    html = (out / "report.html").read_text()
+    assert len(re.findall(r"src='data:image/png;base64,", html)) == len(pngs)
+    assert "<img" in html and "src='figures/" not in html  # self-contained
+
+
+def test_metrics_in_expected_ranges(quick_run):
+    out, _ = quick_run
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["leave_one_out"]["esf_svm"]["accuracy"] >= 0.9
+    rec = m["recognition"]
+    assert rec["n_detections"] >= 3
+    assert rec["precision"] >= 0.8
+    slam = m["slam"]
+    assert slam["pose"]["n_landmarks"] >= 1
+    assert slam["pose"]["ate_rmse_m"] < slam["dr"]["ate_rmse_m"]
+
+
+def test_report_rebuilds_from_the_directory(quick_run, tmp_path):
+    import shutil
+
+    from semslam.cli.main import main
+
+    out, _ = quick_run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    (copy / "report.html").unlink()
+    assert main(["report", str(copy)]) == 0
+    assert (copy / "report.html").stat().st_size > 10000
+
+
+def test_refuses_to_mix_runs(quick_run, capsys):
+    from semslam.cli.main import main
+
+    out, _ = quick_run
+    assert main(["demo", "--quick", "--out", str(out)]) == 1
+    assert "not empty" in capsys.readouterr().err
