@@ -12,6 +12,11 @@ scanner frame *at that line's stamp* (no motion compensation), so motion during 
 Errors: Gaussian noise along the camera ray with sigma = ``noise_floor_m + noise_range2_per_m * r**2``
 (r = camera range), random dropouts, and backscatter outliers (a point in the water column along the
 laser ray). Intensity: ``|cos(incidence)| * exp(-attenuation * (laser range + camera range))``.
+
+Ray casting (float64 where it matters): the scene's few large faces (the tank) are intersected by numba
+kernels, each line testing only the faces its laser plane cuts; the small faces (objects, clutter) are
+grouped into bounding spheres and only the rays and camera segments that pass through one go to Embree
+(see :meth:`semslam.simulation._ray_kernels.RayCaster.split`).
 """
 
 from __future__ import annotations
@@ -20,16 +25,33 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_rng
+from .._validation import _describe, as_rng
 from ..cloud import PointCloud
 from ..errors import SimulationError
 from ..geometry import RigidTransform
 from . import _scanner_kernels as _k
-from ._ray_kernels import RayCaster
+from ._ray_kernels import RayCaster, SplitScene
 from .config import ScannerConfig
 
 #: ``instance`` value of a backscatter outlier (tank surfaces are -1, objects their index).
 BACKSCATTER = -2
+#: The camera's view of a lit point must be free up to this distance (m) before the point.
+_END_GAP_M = 1e-3
+#: Angular margin (rad) of the ray culling by bounding spheres (covers rounding only).
+_PHI_TOL_RAD = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class _Trace:
+    """Noise-free ray casting of one scan: hit face (N,) (-1 none) and laser range (N,) (inf none) of
+    every ray; for the K hits in range and in the camera's view: ray index, camera range, and whether
+    the camera sees the point."""
+
+    tri: np.ndarray
+    laser_m: np.ndarray
+    idx: np.ndarray
+    camera_m: np.ndarray
+    seen: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,6 +76,8 @@ class LaserScanner:
         A, P = np.meshgrid(a, phi, indexing="ij")  # (lines, points)
         d = np.stack([np.cos(P) * np.sin(A), np.sin(P), np.cos(P) * np.cos(A)], axis=-1)
         self.ray_dirs_scanner = d.reshape(cfg.n_lines, cfg.points_per_line, 3)
+        self._dirs_flat = np.ascontiguousarray(self.ray_dirs_scanner.reshape(-1, 3))
+        self._sin_a, self._cos_a, self._phi = np.sin(a), np.cos(a), phi
         self.camera_xyz_scanner = np.array([cfg.baseline_m, 0.0, 0.0])
         tau = cfg.camera_toe_in_rad
         self.camera_axis_scanner = np.array([-np.sin(tau), 0.0, np.cos(tau)])
@@ -88,41 +112,53 @@ class LaserScanner:
             T = np.broadcast_to(T, (cfg.n_lines, 4, 4))
         if T.shape != (cfg.n_lines, 4, 4) or not np.isfinite(T).all():
             raise SimulationError(f"The 'T_world_scanner_lines' argument of LaserScanner.scan must have shape ({cfg.n_lines}, 4, 4) and be finite. Got {T.shape} instead.")
-        m = cfg.points_per_line
+        n_faces = len(caster.face_normals)
+        inst = np.zeros(0, np.int64) if face_instance is None else np.asarray(face_instance)
+        if face_instance is not None and (inst.shape != (n_faces,) or not np.issubdtype(inst.dtype, np.integer)):
+            raise SimulationError(f"The 'face_instance' argument of LaserScanner.scan must be an integer array of shape ({n_faces},) (one per scene face). Got {_describe(inst)} instead.")
+        inst = inst.astype(np.int64, copy=False)
         R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
-        dirs_local = self.ray_dirs_scanner.reshape(-1, 3)
+        tr = self._trace(caster, R, t)
+        dirs_local = self._dirs_flat
         n_rays = len(dirs_local)
-        o32, d32, d64 = _k.laser_rays(dirs_local, R, t, m, caster.offset)
-        tri = caster.first_hit_ids_raw(o32, d32)
-        idx, dist, r_cam, co32, cd32, dist_all = _k.camera_rays(
-            dirs_local, d64, tri, R, t, m, caster.v0, caster.face_normals, self.camera_xyz_scanner,
-            self.camera_axis_scanner, np.cos(cfg.camera_fov_rad / 2), cfg.min_range_m, cfg.max_range_m, caster.offset)
-        seen = caster.unobstructed_raw(co32, cd32, r_cam - 1e-3)
         # errors (drawn for every ray so that the stream does not depend on the scene)
         gauss = rng.normal(0.0, 1.0, n_rays)
-        keep = rng.random(n_rays) >= cfg.dropout_prob
-        scatter = rng.random(n_rays) < cfg.backscatter_prob
-        scatter_u = rng.random(n_rays)
-        sel = seen & keep[idx]
-        idx, dist, r_cam = idx[sel], dist[sel], r_cam[sel]
-        # points in the scanner frame of their own line
-        p_local, intensity = _k.measure(idx, dist, r_cam, dirs_local, d64, tri, caster.face_normals, self.camera_xyz_scanner,
-                                        gauss, cfg.noise_floor_m, cfg.noise_range2_per_m, cfg.attenuation_per_m)
-        line = idx // m
-        inst = np.full(len(idx), -1, dtype=np.int32) if face_instance is None else np.asarray(face_instance)[tri[idx]].astype(np.int32)
-        # backscatter: a point in the water column between min range and the surface (or max range)
-        bs = np.flatnonzero(scatter)
-        far = np.minimum(dist_all[bs], cfg.max_range_m)
-        r_bs = cfg.min_range_m + scatter_u[bs] * np.maximum(far - cfg.min_range_m, 0.0)
-        bs_pts = dirs_local[bs] * r_bs[:, None]
-        order = np.argsort(np.concatenate([idx, bs]), kind="stable")  # ray order: line by line
-        pts = np.concatenate([p_local, bs_pts])[order]
-        inten = np.concatenate([intensity, 0.05 * np.exp(-cfg.attenuation_per_m * 2 * r_bs)])[order]
-        fields = {"line": np.concatenate([line, bs // m]).astype(np.int32)[order],
-                  "instance": np.concatenate([inst, np.full(len(bs), BACKSCATTER, np.int32)])[order]}
+        uniform = rng.random((3, n_rays))  # dropout, backscatter, backscatter range: same stream as 3 draws
+        keep = uniform[0] >= cfg.dropout_prob
+        scatter = uniform[1] < cfg.backscatter_prob
+        scatter_u = uniform[2]
+        pts, inten, line, inst = _k.assemble(
+            tr.idx, tr.camera_m, tr.seen, keep, scatter, scatter_u, gauss, dirs_local, R, tr.tri, tr.laser_m,
+            caster.face_normals, inst, self.camera_xyz_scanner, cfg.points_per_line, cfg.noise_floor_m,
+            cfg.noise_range2_per_m, cfg.attenuation_per_m, cfg.min_range_m, cfg.max_range_m, BACKSCATTER)
+        fields = {"line": line, "instance": inst}
         stamps = line_stamps_s if line_stamps_s is not None else np.zeros(cfg.n_lines)
         cloud = PointCloud(pts, intensity=inten, viewpoint_xyz_m=np.zeros(3), frame_id="scanner", fields=fields)
         return ScanResult(cloud, np.asarray(stamps, dtype=float), n_rays)
+
+    def _trace(self, caster: RayCaster, R: np.ndarray, t: np.ndarray, split: SplitScene | None = None) -> _Trace:
+        """Cast the laser rays and the camera rays (no noise): line poses ``R`` (n_lines, 3, 3), ``t``
+        (n_lines, 3), world frame. ``split`` defaults to ``caster.split()``."""
+        cfg = self.config
+        m = cfg.points_per_line
+        dirs_local = self._dirs_flat
+        sp = caster.split() if split is None else split
+        large = (sp.large_verts, sp.large_v0, sp.large_normal, sp.large_edge_normal, sp.large_edge_offset)
+        spheres = (sp.sphere_centre, sp.sphere_radius)
+        # laser: large faces in float64 here, small faces by Embree for the rays that may reach them
+        tri, t_hit, cand, o32, d32, tf32 = _k.laser_pass(
+            dirs_local, R, t, m, self._sin_a, self._cos_a, self._phi, _PHI_TOL_RAD, sp.large_ids, *large, *spheres,
+            caster.offset)
+        _k.merge_small_hits(tri, t_hit, cand, sp.first_small_hit_ids(o32, d32, tf32), dirs_local, R, t, m,
+                            caster.v0, caster.face_normals)
+        # camera: in view, and is the segment to the lit point free (large faces here, small ones by Embree)?
+        idx, r_cam, blocked, ocand, co32, cd32, len32 = _k.camera_pass(
+            dirs_local, t_hit, R, t, m, self.camera_xyz_scanner, self.camera_axis_scanner,
+            np.cos(cfg.camera_fov_rad / 2), cfg.min_range_m, cfg.max_range_m, _END_GAP_M, *large[1:], *spheres,
+            caster.offset)
+        seen = ~blocked
+        seen[ocand] &= sp.small_unobstructed(co32, cd32, len32)
+        return _Trace(tri, t_hit, idx, r_cam, seen)
 
     def footprint_contains(self, T_world_scanner: np.ndarray, points_world_m: np.ndarray, margin_rad: float = 0.05) -> np.ndarray:
         """True for each world point inside the laser's swept field of view and range (cheap gating)."""
