@@ -88,8 +88,9 @@ def _vox(v):  # pragma: no cover - compiled
 def esf_prepare(points):  # pragma: no cover - compiled
     """Scale float32 points (N, 3) into the 64^3 voxel sphere as PCL does and mark the occupancy grid.
 
-    Returns (local (N, 3) float32, lut (66^3,) uint8 flat padded grid (see ``_flat``), maxd float32). ``maxd == 0`` means that
-    all points coincide.
+    Returns (local (N, 3) float32, vox (N, 3) int64 voxel coordinates of the points, lut (66^3,)
+    uint8 flat padded grid (see ``_flat``), maxd float32). ``maxd == 0`` means that all points
+    coincide.
     """
     n = points.shape[0]
     sx = F0
@@ -116,8 +117,9 @@ def esf_prepare(points):  # pragma: no cover - compiled
         if d > maxd:
             maxd = d
     lut = np.zeros(PAD * PAD * PAD, dtype=np.uint8)
+    vox = np.zeros((n, 3), dtype=np.int64)
     if maxd == F0:
-        return local, lut, maxd
+        return local, vox, lut, maxd
     scale = F1 / maxd * F32
     for i in range(n):
         local[i, 0] = local[i, 0] * scale
@@ -126,12 +128,15 @@ def esf_prepare(points):  # pragma: no cover - compiled
         xx = _vox(local[i, 0])
         yy = _vox(local[i, 1])
         zz = _vox(local[i, 2])
+        vox[i, 0] = xx
+        vox[i, 1] = yy
+        vox[i, 2] = zz
         for a in range(xx - 1, xx + 2):
             for b in range(yy - 1, yy + 2):
                 for c in range(zz - 1, zz + 2):
                     if 0 <= a < GRID and 0 <= b < GRID and 0 <= c < GRID:
                         lut[_flat(a, b, c)] = 1
-    return local, lut, maxd
+    return local, vox, lut, maxd
 
 
 @njit(cache=True, inline="always")
@@ -173,12 +178,11 @@ def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
     inside = 0
     for _ in range(1, la):
         inside += lut[idx]
-        if e1 > 0:
-            idx += sb
-            e1 -= a2
-        if e2 > 0:
-            idx += sc
-            e2 -= a2
+        s1 = e1 > 0  # branch-free steps (the branches are unpredictable)
+        s2 = e2 > 0
+        idx += sb * s1 + sc * s2
+        e1 -= a2 * s1
+        e2 -= a2 * s2
         e1 += b2
         e2 += c2
         idx += sa
@@ -223,19 +227,25 @@ def _dist(px, py, pz, qx, qy, qz):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def esf_evaluate(local, lut, triples, fi, ff):  # pragma: no cover - compiled
-    """Evaluate candidate index triples (M, 3) independently (parallelisable; serial here: numba's
-    workqueue threading layer is not safe for concurrent callers, and gains little on 2 cores).
+def esf_sample(local, vox, lut, triples, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
+    """Evaluate candidate index triples (M, 3) in order until ``n_samples`` are accepted
+    (``acc[0]`` counts them, in place), accumulating in PCL's order; returns the number of triples
+    consumed.
 
-    Row t of ``fi`` (M, 11) int64 gets [accepted, th1, th2, th3, class12, class13, class23, n12,
-    n13, n23, triangle class] and of ``ff`` (M, 8) float32 [d12, d13, d23, ratio12, ratio13,
-    ratio23, d3, d3 weight]. Triangle class: 0 in, 1 out, 2 mixed (as the line classes).
+    A triple is accepted when its points differ, its triangle is not degenerate (Heron's
+    s(s-a)(s-b)(s-c) > 0.001) and its three angle bins are valid. Per accepted sample k:
+    ``d2v[3k:3k+3]`` the side lengths, ``wt_d2[3k:3k+3]`` the classes of the lines 1-2, 1-3, 2-3
+    (0 in, 1 out, 2 mixed), ``d3v[k]`` the square-rooted area, ``wt_d3[k]`` its in-ratio; ``h_a3``
+    (3, 64) gets the A3 histograms (in, out, mix) and ``h_ratio`` the mixed-line ratios.
     """
-    for t in range(triples.shape[0]):
-        fi[t, 0] = 0
+    k = acc[0]
+    t = 0
+    m = triples.shape[0]
+    while t < m and k < n_samples:
         i1 = triples[t, 0]
         i2 = triples[t, 1]
         i3 = triples[t, 2]
+        t += 1
         if i1 == i2 or i1 == i3 or i2 == i3:
             continue
         x1 = local[i1, 0]
@@ -277,21 +287,9 @@ def esf_evaluate(local, lut, triples, fi, ff):  # pragma: no cover - compiled
         th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
         if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
             continue
-        ff[t, 0] = _dist(x1, y1, z1, x2, y2, z2)
-        ff[t, 1] = _dist(x1, y1, z1, x3, y3, z3)
-        ff[t, 2] = _dist(x2, y2, z2, x3, y3, z3)
-        vx1 = _vox(x1)
-        vy1 = _vox(y1)
-        vz1 = _vox(z1)
-        vx2 = _vox(x2)
-        vy2 = _vox(y2)
-        vz2 = _vox(z2)
-        vx3 = _vox(x3)
-        vy3 = _vox(y3)
-        vz3 = _vox(z3)
-        c1, r1, in1, n1 = _lci(lut, vx1, vy1, vz1, vx2, vy2, vz2)
-        c2, r2, in2, n2 = _lci(lut, vx1, vy1, vz1, vx3, vy3, vz3)
-        c3, r3, in3, n3 = _lci(lut, vx2, vy2, vz2, vx3, vy3, vz3)
+        c1, r1, in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
+        c2, r2, in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        c3, r3, in3, n3 = _lci(lut, vox[i2, 0], vox[i2, 1], vox[i2, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
         vs = in1 + in2 + in3
         pc = n1 + n2 + n3
         if vs <= 21:
@@ -303,49 +301,24 @@ def esf_evaluate(local, lut, triples, fi, ff):  # pragma: no cover - compiled
         else:
             cls = 2
             wt = np.float32(vs) / np.float32(pc)
-        fi[t, 0] = 1
-        fi[t, 1] = th1
-        fi[t, 2] = th2
-        fi[t, 3] = th3
-        fi[t, 4] = c1
-        fi[t, 5] = c2
-        fi[t, 6] = c3
-        fi[t, 7] = n1
-        fi[t, 8] = n2
-        fi[t, 9] = n3
-        fi[t, 10] = cls
-        ff[t, 3] = r1
-        ff[t, 4] = r2
-        ff[t, 5] = r3
-        ff[t, 6] = np.sqrt(np.sqrt(heron))
-        ff[t, 7] = wt
-
-
-@njit(cache=True)
-def esf_accumulate(fi, ff, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
-    """Take evaluated triples in order until ``n_samples`` are accepted (``acc[0]`` counts them, in
-    place), accumulating in PCL's order. Per accepted sample k: ``d2v[3k:3k+3]``, ``wt_d2[3k:3k+3]``
-    (line classes), ``d3v[k]``, ``wt_d3[k]``; ``h_a3`` (3, 64) gets the A3 histograms (in, out, mix)
-    and ``h_ratio`` the mixed-line ratios. Returns the number of triples consumed.
-    """
-    k = acc[0]
-    t = 0
-    m = fi.shape[0]
-    while t < m and k < n_samples:
-        if fi[t, 0] == 1:
-            for j in range(3):
-                d2v[3 * k + j] = ff[t, j]
-                wt_d2[3 * k + j] = fi[t, 4 + j]
-                if fi[t, 4 + j] == 2:
-                    h_ratio[_round(ff[t, 3 + j] * F63)] += F1
-            d3v[k] = ff[t, 6]
-            wt_d3[k] = ff[t, 7]
-            cls = fi[t, 10]
-            h_a3[cls, fi[t, 1]] += np.float32(fi[t, 9]) / F32
-            h_a3[cls, fi[t, 2]] += np.float32(fi[t, 7]) / F32
-            h_a3[cls, fi[t, 3]] += np.float32(fi[t, 8]) / F32
-            k += 1
-        t += 1
+        d2v[3 * k] = _dist(x1, y1, z1, x2, y2, z2)
+        d2v[3 * k + 1] = _dist(x1, y1, z1, x3, y3, z3)
+        d2v[3 * k + 2] = _dist(x2, y2, z2, x3, y3, z3)
+        wt_d2[3 * k] = c1
+        wt_d2[3 * k + 1] = c2
+        wt_d2[3 * k + 2] = c3
+        if c1 == 2:
+            h_ratio[_round(r1 * F63)] += F1
+        if c2 == 2:
+            h_ratio[_round(r2 * F63)] += F1
+        if c3 == 2:
+            h_ratio[_round(r3 * F63)] += F1
+        d3v[k] = np.sqrt(np.sqrt(heron))
+        wt_d3[k] = wt
+        h_a3[cls, th1] += np.float32(n3) / F32
+        h_a3[cls, th2] += np.float32(n1) / F32
+        h_a3[cls, th3] += np.float32(n2) / F32
+        k += 1
     acc[0] = k
     return t
 

@@ -14,22 +14,37 @@ N_BINS = 11
 @njit(cache=True, inline="always")
 def pair_features(p1, n1, p2, n2):  # pragma: no cover - compiled
     """PCL ``computePairFeatures``: returns (ok, f1, f2, f3, f4); f1..f4 = 0 when not ok.
+    See :func:`pair_features_sym`."""
+    ok, f1, f2, f3, f4, _ = pair_features_sym(p1, n1, p2, n2)
+    return ok, f1, f2, f3, f4
+
+
+@njit(cache=True, inline="always")
+def pair_features_sym(p1, n1, p2, n2):  # pragma: no cover - compiled
+    """PCL ``computePairFeatures``: returns (ok, f1, f2, f3, f4, symmetric); f1..f4 = 0 when not ok.
 
     f1 = atan2(w.n2, u.n2), f2 = v.n2, f3 = u.d/|d|, f4 = |d| with the Darboux frame u = n1,
     v = d x u / |d x u|, w = u x v, after swapping the points so that the source is the one whose
     normal makes the smaller angle with the line joining them.
+
+    ``symmetric``: the features of (p2, n2, p1, n1) are bit for bit the same (the swapped call
+    swaps back, with exactly negated dot products); False only when the swap test ties (or a
+    normal is NaN), where both calls keep their own source point.
     """
     dx = p2[0] - p1[0]
     dy = p2[1] - p1[1]
     dz = p2[2] - p1[2]
     f4 = math.sqrt(dx * dx + dy * dy + dz * dz)
     if f4 == 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, True
     a1 = (n1[0] * dx + n1[1] * dy + n1[2] * dz) / f4
     a2 = (n2[0] * dx + n2[1] * dy + n2[2] * dz) / f4
     ux, uy, uz = n1[0], n1[1], n1[2]
     mx, my, mz = n2[0], n2[1], n2[2]
-    if math.acos(abs(a1)) > math.acos(abs(a2)):
+    c1 = math.acos(abs(a1))
+    c2 = math.acos(abs(a2))
+    symmetric = c1 > c2 or c2 > c1
+    if c1 > c2:
         ux, uy, uz = n2[0], n2[1], n2[2]
         mx, my, mz = n1[0], n1[1], n1[2]
         dx, dy, dz = -dx, -dy, -dz
@@ -41,7 +56,7 @@ def pair_features(p1, n1, p2, n2):  # pragma: no cover - compiled
     vz = dx * uy - dy * ux
     vn = math.sqrt(vx * vx + vy * vy + vz * vz)
     if vn == 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, symmetric
     vx /= vn
     vy /= vn
     vz /= vn
@@ -50,7 +65,7 @@ def pair_features(p1, n1, p2, n2):  # pragma: no cover - compiled
     wz = ux * vy - uy * vx
     f2 = vx * mx + vy * my + vz * mz
     f1 = math.atan2(wx * mx + wy * my + wz * mz, ux * mx + uy * my + uz * mz)
-    return True, f1, f2, f3, f4
+    return True, f1, f2, f3, f4, symmetric
 
 
 @njit(cache=True, inline="always")
@@ -95,6 +110,47 @@ def spfh(points, normals, indptr, indices, valid, skip_invalid):  # pragma: no c
             out[i, _bin(N_BINS * ((f1 + math.pi) / (2.0 * math.pi)), N_BINS)] += incr
             out[i, N_BINS + _bin(N_BINS * ((f2 + 1.0) * 0.5), N_BINS)] += incr
             out[i, 2 * N_BINS + _bin(N_BINS * ((f3 + 1.0) * 0.5), N_BINS)] += incr
+    return out
+
+
+@njit(cache=True, inline="always")
+def _add_pair(out, i, f1, f2, f3, incr):  # pragma: no cover - compiled
+    out[i, _bin(N_BINS * ((f1 + math.pi) / (2.0 * math.pi)), N_BINS)] += incr
+    out[i, N_BINS + _bin(N_BINS * ((f2 + 1.0) * 0.5), N_BINS)] += incr
+    out[i, 2 * N_BINS + _bin(N_BINS * ((f3 + 1.0) * 0.5), N_BINS)] += incr
+
+
+@njit(cache=True)
+def spfh_symmetric(points, normals, indptr, indices, valid, skip_invalid):  # pragma: no cover
+    """:func:`spfh` for symmetric neighbourhoods (j in row i <=> i in row j, as radius searches):
+    each pair's features are computed once and binned into both rows, unless the swap test ties
+    (then each side computes its own). Same result bit for bit: every row only ever adds its
+    own constant increment, so the order of the additions does not matter.
+    """
+    n = len(indptr) - 1
+    out = np.zeros((n, 3 * N_BINS))
+    incr = np.zeros(n)
+    for i in range(n):
+        if skip_invalid and not valid[i]:
+            continue
+        k = 0
+        for t in range(indptr[i], indptr[i + 1]):
+            if valid[indices[t]] or not skip_invalid:
+                k += 1
+        if k >= 2:
+            incr[i] = 100.0 / (k - 1)
+    for i in range(n):
+        if incr[i] == 0.0:
+            continue
+        for t in range(indptr[i], indptr[i + 1]):
+            j = indices[t]
+            if j <= i or (skip_invalid and not valid[j]):
+                continue
+            _, f1, f2, f3, _, sym = pair_features_sym(points[i], normals[i], points[j], normals[j])
+            _add_pair(out, i, f1, f2, f3, incr[i])
+            if not sym:
+                _, f1, f2, f3, _, sym = pair_features_sym(points[j], normals[j], points[i], normals[i])
+            _add_pair(out, j, f1, f2, f3, incr[j])
     return out
 
 

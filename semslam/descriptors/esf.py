@@ -66,7 +66,7 @@ def compute_esf(
     pts32 = np.ascontiguousarray(pts, dtype=np.float32)
     if not np.isfinite(pts32).all():
         raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must fit in float32. Got values beyond 3.4e38.")
-    local, lut, maxd = K.esf_prepare(pts32)
+    local, vox, lut, maxd = K.esf_prepare(pts32)
     if not maxd > 0:
         raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points. Got {n} identical points.")
     draw = _sampler(sampler, seed, n, caller)
@@ -90,10 +90,7 @@ def compute_esf(
         rate = max(acc[0] / drawn, 0.01) if drawn else 0.95
         chunk = int(min(max_draws - drawn, (n_samples - acc[0]) / rate * 1.03 + 64))
         triples = draw(chunk)
-        fi = np.empty((chunk, 11), dtype=np.int64)
-        ff = np.empty((chunk, 8), dtype=np.float32)
-        K.esf_evaluate(local, lut, triples, fi, ff)
-        drawn += K.esf_accumulate(fi, ff, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
+        drawn += K.esf_sample(local, vox, lut, triples, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
     return K.esf_histogram(n_samples, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from .._validation import as_float_array, check_choice
 from ..errors import DescriptorError
-from ._pair_kernels import fpfh_from_spfh, spfh
+from ._pair_kernels import fpfh_from_spfh, spfh, spfh_symmetric
 from .neighbors import Neighborhoods, find_neighbors
 
 
@@ -24,8 +24,7 @@ def compute_spfh(
     pts, nrm = _check(points_xyz_m, normals_xyz, caller)
     check_choice("nan_normals", nan_normals, ("pcl", "skip"), caller=caller)
     neighbors.check_for(len(pts), caller)
-    valid = np.isfinite(nrm).all(axis=1)
-    return spfh(pts, nrm, neighbors.indptr, neighbors.indices, valid, nan_normals == "skip")
+    return _spfh(pts, nrm, neighbors, nan_normals)
 
 
 def compute_fpfh(
@@ -86,9 +85,14 @@ def compute_fpfh(
     else:
         neighbors.check_for(len(pts), caller)
     check_choice("nan_normals", nan_normals, ("pcl", "skip"), caller=caller)
-    valid = np.isfinite(nrm).all(axis=1)
-    hist = spfh(pts, nrm, neighbors.indptr, neighbors.indices, valid, nan_normals == "skip")
+    hist = _spfh(pts, nrm, neighbors, nan_normals)
     return fpfh_from_spfh(hist, neighbors.indptr, neighbors.indices, neighbors.sqdist_m2)
+
+
+def _spfh(pts, nrm, neighbors, nan_normals):
+    valid = np.isfinite(nrm).all(axis=1)
+    kernel = spfh_symmetric if neighbors.symmetric else spfh
+    return kernel(pts, nrm, neighbors.indptr, neighbors.indices, valid, nan_normals == "skip")
 
 
 def _check(points_xyz_m, normals_xyz, caller):

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._validation import as_float_array, check_int, check_positive
+from .._validation import as_float_array, check_choice, check_int, check_positive
 from ..errors import DescriptorError, InputError
+from ._neighbors_kernels import grid_bucket_count, grid_fill, sort_rows
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,14 +27,19 @@ class Neighborhoods:
         Neighbours of point ``i`` are ``indices[indptr[i]:indptr[i + 1]]``.
     indices : ndarray of shape (M,), int64
         Point indices. Every list contains the query point itself (at squared distance 0), like PCL's
-        searches; k-nearest lists are sorted by increasing distance, radius lists are not.
+        searches; k-nearest lists are sorted by increasing distance, radius lists are not (unless
+        ``find_neighbors(..., sort=True)``).
     sqdist_m2 : ndarray of shape (M,), float64
         Squared distances (m^2) matching ``indices``.
+    symmetric : bool
+        True when j is a neighbour of i exactly when i is a neighbour of j, with the same squared
+        distance (the grid radius search guarantees it); lets FPFH compute each pair once.
     """
 
     indptr: np.ndarray
     indices: np.ndarray
     sqdist_m2: np.ndarray
+    symmetric: bool = False
 
     @property
     def n_points(self) -> int:
@@ -59,6 +65,8 @@ def find_neighbors(
     k: int | None = None,
     radius_m: float | None = None,
     workers: int = -1,
+    method: str = "auto",
+    sort: bool = False,
 ) -> Neighborhoods:
     """Neighbourhoods of every point, by k nearest neighbours or by radius (exactly one of them).
 
@@ -69,34 +77,78 @@ def find_neighbors(
     k : int, optional
         Number of nearest neighbours, the point itself included (as PCL's ``setKSearch``); clipped to N.
     radius_m : float, optional
-        Search radius (m); every point closer than ``radius_m`` (the point itself included) is a
-        neighbour, as PCL's ``setRadiusSearch``.
+        Search radius (m); every point closer than ``radius_m`` (squared distance < radius^2; the
+        point itself included) is a neighbour, as PCL's ``setRadiusSearch``.
     workers : int
-        Threads used by scipy's cKDTree k-nearest query (-1 = all cores); the radius search is
-        single-threaded (``cKDTree.sparse_distance_matrix``).
+        Threads used by scipy's cKDTree k-nearest query (-1 = all cores). The radius search is
+        single-threaded.
+    method : {"auto", "grid", "kdtree"}
+        Radius search: "grid" a uniform grid of cells of side ~``radius_m`` (numba, fastest);
+        "kdtree" scipy's ``cKDTree.sparse_distance_matrix``; "auto" the grid unless the cloud
+        spans more than 2^20 radii along an axis. The neighbour sets are the same (up to
+        points at exactly ``radius_m``, where the two round differently); their order within a
+        row differs. k-nearest searches always use cKDTree.
+    sort : bool
+        Sort every radius neighbourhood by increasing distance (then index); k-nearest lists are
+        always sorted.
 
     Returns
     -------
     Neighborhoods
     """
-    pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller="find_neighbors",
-                         error=DescriptorError)
+    caller = "find_neighbors"
+    pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller, error=DescriptorError)
     if (k is None) == (radius_m is None):
         raise InputError(
             "Exactly one of the 'k' and 'radius_m' arguments of find_neighbors must be given. "
             f"Got k={k!r} and radius_m={radius_m!r} instead."
         )
+    check_choice("method", method, ("auto", "grid", "kdtree"), caller=caller)
     n = len(pts)
     if n == 0:
         return Neighborhoods(np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0))
-    tree = cKDTree(pts)
     if k is not None:
-        k = min(check_int("k", k, caller="find_neighbors", minimum=1), n)
-        dist, idx = tree.query(pts, k=k, workers=workers)
+        k = min(check_int("k", k, caller=caller, minimum=1), n)
+        dist, idx = cKDTree(pts).query(pts, k=k, workers=workers)
         dist = np.asarray(dist, dtype=np.float64).reshape(n, k)
         idx = np.asarray(idx, dtype=np.int64).reshape(n, k)
         return Neighborhoods(np.arange(n + 1, dtype=np.int64) * k, idx.ravel(), (dist**2).ravel())
-    r = check_positive("radius_m", radius_m, caller="find_neighbors")
+    r = check_positive("radius_m", radius_m, caller=caller)
+    origin = pts.min(axis=0)
+    # Cells a little wider than r, so that rounding can never put two neighbours two cells apart.
+    cell_m = r * (1.0 + 1e-8)
+    fits = float((pts.max(axis=0) - origin).max()) / cell_m < _MAX_CELLS_PER_AXIS
+    if method == "kdtree" or (method == "auto" and not fits):
+        nb = _kdtree_radius(pts, r)
+    elif not fits:
+        raise DescriptorError(
+            f"The 'points_xyz_m' argument of {caller} (method='grid') must span fewer than "
+            f"{_MAX_CELLS_PER_AXIS} radii along every axis. Got an extent of "
+            f"{float((pts.max(axis=0) - origin).max())} m for radius_m={r}; use method='kdtree'."
+        )
+    else:
+        nb = _grid_radius(pts, origin, r, cell_m)
+    if sort:
+        sort_rows(nb.indptr, nb.indices, nb.sqdist_m2)
+    return nb
+
+
+_MAX_CELLS_PER_AXIS = 2**20
+
+
+def _grid_radius(pts: np.ndarray, origin: np.ndarray, r: float, cell_m: float) -> Neighborhoods:
+    grid, counts = grid_bucket_count(pts, origin, cell_m, r)
+    indptr = np.zeros(len(pts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    # Allocated by numpy (large arrays get transparent huge pages: fewer page faults than numba's).
+    indices = np.empty(indptr[-1], dtype=np.int64)
+    sqdist = np.empty(indptr[-1])
+    grid_fill(*grid, r, indptr, indices, sqdist)
+    return Neighborhoods(indptr, indices, sqdist, symmetric=True)
+
+
+def _kdtree_radius(pts: np.ndarray, r: float) -> Neighborhoods:
+    tree = cKDTree(pts)
     # All pairs within r, the point itself included (one vectorised call, with the distances).
     pairs = tree.sparse_distance_matrix(tree, r, output_type="ndarray")
     rows = pairs["i"].astype(np.int64)
@@ -106,6 +158,6 @@ def find_neighbors(
     if rows.size and not (rows[1:] >= rows[:-1]).all():
         order = np.argsort(rows, kind="stable")
         pairs, rows = pairs[order], rows[order]
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    indptr = np.zeros(len(pts) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=len(pts)), out=indptr[1:])
     return Neighborhoods(indptr, pairs["j"].astype(np.int64), pairs["v"] ** 2)

@@ -8,7 +8,7 @@ import numpy as np
 
 from .._validation import as_float_array
 from ..errors import DescriptorError
-from ._normals_kernels import neighborhood_covariances
+from ._normals_kernels import normals_from_neighborhoods
 from .neighbors import Neighborhoods, find_neighbors
 
 
@@ -87,16 +87,5 @@ def estimate_normals(
         neighbors = find_neighbors(pts, k=k, radius_m=radius_m, workers=workers)
     else:
         neighbors.check_for(len(pts), caller)
-    counts = neighbors.counts
-    cov = neighborhood_covariances(pts, neighbors.indptr, neighbors.indices)
-    eigval, eigvec = np.linalg.eigh(cov)  # ascending eigenvalues
-    normals = np.ascontiguousarray(eigvec[:, :, 0])
-    trace = eigval.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        curvature = np.abs(eigval[:, 0] / trace)
-    bad = (counts < 3) | ~(trace > 0)
-    normals[bad] = np.nan
-    curvature[bad] = np.nan
-    flip = np.einsum("ij,ij->i", vp - pts, normals) < 0
-    normals[flip] *= -1.0
-    return NormalsResult(normals, curvature, counts)
+    normals, curvature = normals_from_neighborhoods(pts, neighbors.indptr, neighbors.indices, vp)
+    return NormalsResult(normals, curvature, neighbors.counts)
