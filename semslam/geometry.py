@@ -17,8 +17,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
-
 from ._validation import as_float_array
 from .errors import InputError
 
@@ -84,9 +82,25 @@ def wrap_angle(angle: Any) -> Any:
 
 
 def quat_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix."""
-    x, y, z, w = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat()
-    q = np.array([w, x, y, z])
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method: stable for every
+    rotation, including 180-degree turns)."""
+    m = np.asarray(R, dtype=np.float64)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    cand = np.array([tr, m[0, 0], m[1, 1], m[2, 2]])
+    k = int(np.argmax(cand))
+    if k == 0:
+        s = 2.0 * np.sqrt(max(1.0 + tr, 0.0))
+        q = np.array([0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s])
+    elif k == 1:
+        s = 2.0 * np.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 0.0))
+        q = np.array([(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s])
+    elif k == 2:
+        s = 2.0 * np.sqrt(max(1.0 + m[1, 1] - m[0, 0] - m[2, 2], 0.0))
+        q = np.array([(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s])
+    else:
+        s = 2.0 * np.sqrt(max(1.0 + m[2, 2] - m[0, 0] - m[1, 1], 0.0))
+        q = np.array([(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s])
+    q /= np.linalg.norm(q)
     return -q if q[0] < 0 else q
 
 
@@ -97,7 +111,11 @@ def rotation_from_quat_wxyz(quat_wxyz: Any) -> np.ndarray:
     if n < 1e-12:
         raise InputError("The 'quat_wxyz' argument of rotation_from_quat_wxyz must have a non-zero norm. Got 0 instead.")
     w, x, y, z = q / n
-    return Rotation.from_quat([x, y, z, w]).as_matrix()
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def skew(v: np.ndarray) -> np.ndarray:

@@ -145,3 +145,16 @@ def test_every_error_is_a_semslam_error():
     classes = [c for c in vars(errors).values() if isinstance(c, type) and issubclass(c, Exception)]
     assert len(classes) > 10
     assert all(issubclass(c, SemslamError) for c in classes)
+
+
+def test_quaternions_match_scipy_including_half_turns():
+    rng = np.random.default_rng(5)
+    rots = list(Rotation.random(200, random_state=7).as_matrix())
+    rots += [Rotation.from_rotvec(np.pi * a / np.linalg.norm(a)).as_matrix() for a in rng.normal(size=(20, 3))]
+    rots += [np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1]), np.diag([-1.0, -1, 1]), np.eye(3)]
+    for R in rots:
+        q = quat_wxyz_from_rotation(R)
+        x, y, z, w = Rotation.from_matrix(R).as_quat()
+        ref = np.array([w, x, y, z])
+        assert min(np.abs(q - ref).max(), np.abs(q + ref).max()) < 1e-12
+        np.testing.assert_allclose(rotation_from_quat_wxyz(q), R, atol=1e-12)
