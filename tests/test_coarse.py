@@ -109,3 +109,103 @@ def test_bad_inputs_raise_named_errors():
     fs_nan[2:] = np.nan
     with pytest.raises(RegistrationError, match="finite features"):
         align_prerejective(src, fs_nan, tgt, ft)
+
+
+# -- global grid search (semslam.registration.search): kernels against brute force ----------------------
+
+from semslam.registration import _search_kernels as SK  # noqa: E402
+from semslam.registration.search import (  # noqa: E402
+    DistanceField, RangeImage, pairwise_rotation_distances, so3_grid)
+from semslam.symmetry import Symmetry  # noqa: E402
+
+
+def test_so3_grid_is_rotations_and_covers_so3():
+    G = so3_grid(4096)
+    np.testing.assert_allclose(np.einsum("kji,kjl->kil", G, G), np.broadcast_to(np.eye(3), G.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(G), 1.0, atol=1e-12)
+    probe = Rotation.random(300, random_state=0).as_matrix()
+    d = pairwise_rotation_distances(probe, G, Symmetry())  # angle between probe and grid rotations
+    assert np.degrees(d.min(axis=1).max()) < 15.0  # covering radius of 4096 rotations ~ 10-13 degrees
+    np.testing.assert_array_equal(so3_grid(64), so3_grid(64))
+
+
+def test_distance_field_nearest_matches_brute_force():
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(0)
+    model = rng.uniform(-0.05, 0.05, (400, 3))
+    f = DistanceField.build(model, cell_m=0.004, margin_m=0.02, truncation_m=0.02)
+    q = rng.uniform(-0.06, 0.06, (500, 3))
+    got = f.nearest_points(q)
+    ijk = np.floor((q - f.origin) / f.cell_m).astype(int)
+    centres = f.origin + (ijk + 0.5) * f.cell_m
+    d, j = cKDTree(model).query(centres)
+    inside = (ijk >= 0).all(axis=1) & (ijk < f.offsets.shape[:3]).all(axis=1) & (d <= 0.02)
+    assert inside.sum() > 300
+    np.testing.assert_allclose(got[inside], model[j[inside]], atol=f.quantum_m)  # int8 quantisation
+    assert np.isnan(got[~inside]).all()
+
+
+def test_translation_alignment_recovers_offset():
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(4000, 3))
+    model = 0.03 * d / np.linalg.norm(d, axis=1, keepdims=True) * [1.0, 0.7, 0.5]  # an ellipsoid's surface
+    f = DistanceField.build(model, cell_m=0.002)
+    src = model[model[:, 2] > 0][::10] - [0.006, -0.004, 0.003]  # a partial view; truth t = (6, -4, 3) mm
+    Rs = np.eye(3)[None].copy()
+    ts = np.zeros((1, 3))
+    cost = SK.align_and_score(Rs, ts, src, f.params, f.cell_m, f.offsets, np.array([0.03] * 5 + [0.01] * 25), 0.006)
+    np.testing.assert_allclose(ts[0], [0.006, -0.004, 0.003], atol=0.0005)
+    assert cost[0] < 0.1
+
+
+def _visibility_brute(R, t, pts, nrm, img: RangeImage, tol):
+    n_front = n_bad = 0
+    for p, n in zip(pts, nrm):
+        ps, ns = R.T @ (p - t), R.T @ n
+        r = ps - img.viewpoint
+        if ns @ r >= 0:
+            continue
+        n_front += 1
+        q = img.F @ r
+        if q[2] <= 1e-9:
+            n_bad += 1
+            continue
+        i, j = int(np.floor((q[0] / q[2] - img.u0) / img.cell)), int(np.floor((q[1] / q[2] - img.v0) / img.cell))
+        if not (0 <= i < img.range_min.shape[0] and 0 <= j < img.range_min.shape[1]):
+            n_bad += 1
+        elif not np.isfinite(img.range_min[i, j]) or np.linalg.norm(r) < img.range_min[i, j] - tol:
+            n_bad += 1
+    return n_bad / max(n_front, 1)
+
+
+def test_visibility_cost_matches_brute_force_and_separates_a_flip():
+    rng = np.random.default_rng(2)
+    # a model: a half-sphere cap (object frame) seen from +z; its scan from a scanner 0.8 m above
+    d = rng.normal(size=(1500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[:, 2] = np.abs(d[:, 2])
+    model, normals = 0.04 * d, d
+    T_os = np.eye(4)  # scanner frame: object 0.8 m along +z, scanner looking down the object's -z
+    T_os[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T_os[:3, 3] = [0.0, 0.0, 0.8]
+    scan = (model[model[:, 2] > 0.005] - T_os[:3, 3]) @ T_os[:3, :3]  # R^T (p - t)
+    img = RangeImage.build(scan, np.zeros(3), cell_m=0.006)
+    flip = T_os.copy()
+    flip[:3, :3] = np.diag([1.0, 1.0, 1.0]) @ T_os[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+    Rs = np.stack([T_os[:3, :3], flip[:3, :3]])
+    ts = np.stack([T_os[:3, 3], flip[:3, 3]])
+    got = img.visibility_cost(Rs, ts, model, normals, 0.01)
+    want = [_visibility_brute(Rs[k], ts[k], model, normals, img, 0.01) for k in range(2)]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert got[0] < 0.1 and got[1] > 0.5  # the true pose explains the scan; the flipped one does not
+
+
+def test_pairwise_rotation_distances_match_symmetry_errors():
+    R = Rotation.random(20, random_state=3).as_matrix()
+    for sym in (Symmetry(), Symmetry("discrete", axis_object=[0, 1, 0], order=2),
+                Symmetry("continuous", axis_object=[0, 0, 1])):
+        D = pairwise_rotation_distances(R, R[::-1], sym)
+        # rotations of T_object_scanner: object orientations are the transposes
+        want = np.array([[sym.rotation_error_rad(a.T, b.T) for b in R[::-1]] for a in R])
+        np.testing.assert_allclose(D, want, atol=1e-6)

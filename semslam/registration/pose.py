@@ -1,10 +1,11 @@
-"""Pose of a recognised object: align the scanned cluster onto the object's model (FPFH + prerejective
-RANSAC from the centroid guess, then point-to-plane ICP), canonicalise the orientation under the object's
-symmetry, and estimate a 6x6 covariance (order x y z roll pitch yaw, see :mod:`.covariance`).
+"""Pose of a recognised object: a global search over a deterministic SO(3) grid scored with the model's
+distance field and a visibility (free-space) term (:mod:`.search`), point-to-plane ICP of the best
+distinct hypotheses, selection by the same score after ICP, then the orientation canonicalised under
+the object's symmetry and a 6x6 covariance (order x y z roll pitch yaw, see :mod:`.covariance`).
+The papers' FPFH + prerejective RANSAC remains available (``PoseConfig(coarse_method="ransac")``).
 
 The model is prepared once per class (:func:`prepare_pose_model`): either the matched database view, or
-all views of the class fused in the object frame (the default in the pipeline; see the report numbers in
-``benchmarks/registration.py``). The cluster is the SOURCE and the model the TARGET, so every cluster point
+all views of the class fused in the object frame (better: see ``benchmarks/pose_accuracy.py``). The cluster is the SOURCE and the model the TARGET, so every cluster point
 has a model point to match and the ICP uses the model's clean normals; the result is inverted into
 ``T_scanner_object``.
 """
@@ -28,15 +29,43 @@ from .coarse import align_prerejective
 from .covariance import point_to_plane_information, tangent_covariance, xyz_rpy_covariance_of_inverse
 from .icp import ICP_METHODS, IcpTarget, align_icp, prepare_icp_target
 from .result import RegistrationResult
+from .search import DistanceField, RangeImage, rotation_distances, search_hypotheses, so3_grid
 
 _CALLER = "estimate_object_pose"
+#: Private calibration hook: when True, each covariance's linear terms are appended to _COVARIANCE_TERMS.
+_STORE_COVARIANCE_TERMS = False
+_COVARIANCE_TERMS: list = []
 
 
 @dataclass(frozen=True)
 class PoseConfig:
     """Settings of :func:`estimate_object_pose` (lengths in metres, angles in radians)."""
 
-    #: Voxel leaf of the cluster and model for the features and the RANSAC.
+    #: ``"grid"`` (SO(3) grid + distance field + visibility, default) or ``"ransac"`` (FPFH + prerejective RANSAC).
+    coarse_method: str = "grid"
+    #: Orientations of the SO(3) grid (super-Fibonacci; 4096 ~ 10 degrees apart).
+    n_rotations: int = 4096
+    #: Voxel leaf of the cluster for the grid search.
+    search_voxel_m: float = 0.008
+    #: Cell of the model's distance field.
+    field_cell_m: float = 0.0025
+    #: Truncation of the fit cost ``mean min(d, tau)^2 / tau^2``.
+    fit_tau_m: float = 0.006
+    #: Voxel leaf of the model points used by the visibility term.
+    visibility_voxel_m: float = 0.006
+    #: Weight of the visibility cost (share of predicted-visible model points contradicting the scan).
+    visibility_weight: float = 1.0
+    #: A predicted model point this much in front of the observed surface is in free space.
+    visibility_tol_m: float = 0.01
+    #: Angular cell of the cluster's range image, as a length at the cluster's range.
+    image_cell_m: float = 0.008
+    #: Cluster points used to rank every grid orientation (the first, coarse pass of the search).
+    n_coarse_points: int = 32
+    #: Best orientations of the coarse pass fitted again with every search point and given the visibility term.
+    n_candidates: int = 256
+    #: Distinct grid hypotheses refined by ICP and compared by their final score.
+    n_refine: int = 4
+    #: Voxel leaf of the cluster and model for the features and the RANSAC (``coarse_method="ransac"``).
     voxel_m: float = 0.004
     normal_radius_m: float = 0.01
     feature_radius_m: float = 0.02
@@ -49,36 +78,49 @@ class PoseConfig:
     coarse_selection: str = "msac"
     icp_method: str = "plane"
     icp_max_correspondence_m: float = 0.006
-    #: A first, wider ICP pass (0 = none) that pulls the RANSAC estimate into the fine pass's basin.
+    #: A first, wider ICP pass (0 = none) that pulls the coarse estimate into the fine pass's basin.
     icp_wide_correspondence_m: float = 0.02
     icp_max_iterations: int = 30
     #: Neighbours for the model normals (ICP and covariance).
     model_normals_k: int = 15
     #: Voxel leaf of the model used by ICP (0 = every model point).
     model_icp_voxel_m: float = 0.0015
-    #: Multiplies the Gauss-Newton covariance (correlated residuals); calibrated so that the mean NEES
-    #: is ~6 on simulated ball-valve scans from a prior pose (see the report: NOT yet consistent for the
-    #: other fittings, whose errors are dominated by near-symmetries the Hessian does not capture).
-    covariance_inflation: float = 2.5
+    #: Multiplies the Gauss-Newton covariance (correlated residuals, model and motion errors). With the
+    #: floors below, calibrated so that the mean NEES of the correct poses is ~6 over the four fittings on
+    #: the simulator's laser scans (``benchmarks/pose_accuracy.py --calibrate``).
+    covariance_inflation: float = 5.0
+    #: Floors added to the variances (per axis, in the object frame): no direction is more certain than this
+    #: (the scans are distorted by the vehicle's motion within a scan; the database views are noisy).
+    min_sigma_translation_m: float = 0.001
+    min_sigma_rotation_rad: float = 0.04
     #: Variance given to a rotation the symmetry makes unobservable (rad^2): effectively no information.
     unobservable_variance_rad2: float = 1e4
-    #: Reliability thresholds: fitness (inlier fraction within ``icp_max_correspondence_m``) and RMSE.
+    #: Reliability thresholds: fitness (inlier fraction within ``icp_max_correspondence_m``), RMSE,
+    #: visibility cost of the chosen pose, and score margin to the best non-equivalent hypothesis.
     min_fitness: float = 0.7
     max_rmse_m: float = 0.003
+    max_visibility: float = 0.3
+    #: Calibrated on the simulator's scans: most wrong poses (flips) have a margin < 0.03.
+    min_score_margin: float = 0.03
     min_points: int = 30
 
     def __post_init__(self) -> None:
         c = "PoseConfig"
         for name in ("voxel_m", "normal_radius_m", "feature_radius_m", "similarity", "coarse_max_correspondence_m",
-                     "icp_max_correspondence_m", "covariance_inflation", "unobservable_variance_rad2", "max_rmse_m"):
+                     "icp_max_correspondence_m", "covariance_inflation", "unobservable_variance_rad2", "max_rmse_m",
+                     "search_voxel_m", "field_cell_m", "fit_tau_m", "visibility_voxel_m", "visibility_tol_m",
+                     "image_cell_m", "max_visibility"):
             check_positive(name, getattr(self, name), caller=c)
-        check_positive("model_icp_voxel_m", self.model_icp_voxel_m, caller=c, allow_zero=True)
-        check_positive("icp_wide_correspondence_m", self.icp_wide_correspondence_m, caller=c, allow_zero=True)
-        for name in ("coarse_max_iterations", "k_correspondences", "icp_max_iterations", "min_points"):
+        for name in ("model_icp_voxel_m", "icp_wide_correspondence_m", "visibility_weight", "min_score_margin",
+                     "min_sigma_translation_m", "min_sigma_rotation_rad"):
+            check_positive(name, getattr(self, name), caller=c, allow_zero=True)
+        for name in ("coarse_max_iterations", "k_correspondences", "icp_max_iterations", "min_points",
+                     "n_rotations", "n_refine", "n_candidates", "n_coarse_points"):
             check_int(name, getattr(self, name), caller=c, minimum=1)
         check_int("model_normals_k", self.model_normals_k, caller=c, minimum=5)
         check_choice("icp_method", self.icp_method, tuple(ICP_METHODS), caller=c)
         check_choice("coarse_selection", self.coarse_selection, ("msac", "error"), caller=c)
+        check_choice("coarse_method", self.coarse_method, ("grid", "ransac"), caller=c)
         for name in ("inlier_fraction", "min_fitness"):
             if not 0 <= float(getattr(self, name)) <= 1:
                 raise InputError(f"The {name!r} argument of {c} must be in [0, 1]. Got {getattr(self, name)!r} instead.")
@@ -96,21 +138,34 @@ class PoseModel:
     points_object : ndarray (M, 3)
         Model points in the object's canonical frame (metres), before voxelisation.
     coarse_points, coarse_features : ndarray (Mc, 3), (Mc, 33)
-        Voxelised points and their FPFH, for the RANSAC.
+        Voxelised points and their FPFH, for the RANSAC (``coarse_features`` is None with the grid search).
     icp_target : IcpTarget
         The ICP target (model points, normals estimated from ``model_normals_k`` neighbours).
     normals_object : ndarray (Mi, 3)
         Unit normals of the ICP target points (for the covariance).
+    distance_field : DistanceField
+        Nearest model point per 2 mm cell (grid search).
+    visibility_points, visibility_normals : ndarray (Mv, 3)
+        Voxelised model points with outward normals (object frame) for the visibility term.
+    rotations : ndarray (n_rotations, 3, 3)
+        The SO(3) grid.
+    radius_m : float
+        RMS distance of the model points to the object origin.
     """
 
     points_object: np.ndarray
     coarse_points: np.ndarray
-    coarse_features: np.ndarray
+    coarse_features: np.ndarray | None
     coarse_tree: cKDTree
-    feature_tree: cKDTree
+    feature_tree: cKDTree | None
     icp_target: IcpTarget
     normals_object: np.ndarray
     config: PoseConfig = field(repr=False)
+    distance_field: DistanceField | None = field(default=None, repr=False)
+    visibility_points: np.ndarray | None = field(default=None, repr=False)
+    visibility_normals: np.ndarray | None = field(default=None, repr=False)
+    rotations: np.ndarray | None = field(default=None, repr=False)
+    radius_m: float = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +184,13 @@ class PoseEstimate:
     rmse_m : float
         RMS point-to-point distance of those inliers.
     reliable : bool
-        Coarse stage converged, fitness >= ``min_fitness`` and rmse <= ``max_rmse_m``.
+        Fitness >= ``min_fitness``, rmse <= ``max_rmse_m``, visibility cost <= ``max_visibility`` and score
+        margin >= ``min_score_margin`` (grid search), or the RANSAC converged (``coarse_method="ransac"``).
+    visibility : float
+        Share of the model points predicted visible that contradict the scan (grid search; NaN otherwise).
+    score_margin : float
+        Final score of the best hypothesis not equivalent to the chosen one (> 10 degrees modulo the symmetry
+        or > 1 cm away) minus the chosen one's (inf when every refined hypothesis converged to it).
     """
 
     T_scanner_object: RigidTransform
@@ -143,6 +204,8 @@ class PoseEstimate:
     icp_converged: bool = False
     residual_sigma_m: float = float("nan")
     extras: dict = field(default_factory=dict)
+    visibility: float = float("nan")
+    score_margin: float = float("nan")
 
     def to_dict(self) -> dict:
         return {
@@ -150,13 +213,15 @@ class PoseEstimate:
             "covariance_order": ["x", "y", "z", "roll", "pitch", "yaw"], "fitness": float(self.fitness),
             "rmse_m": float(self.rmse_m), "reliable": bool(self.reliable), "n_points": int(self.n_points),
             "coarse_fitness": float(self.coarse_fitness), "icp_converged": bool(self.icp_converged),
-            "residual_sigma_m": float(self.residual_sigma_m),
+            "residual_sigma_m": float(self.residual_sigma_m), "visibility": float(self.visibility),
+            "score_margin": float(self.score_margin),
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
         }
 
 
 def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseModel:
-    """Prepare an object model: voxelised points + FPFH for the RANSAC, ICP target with normals.
+    """Prepare an object model: distance field, visibility samples and SO(3) grid for the grid search
+    (or voxelised points + FPFH for the RANSAC), ICP target with normals.
 
     Parameters
     ----------
@@ -167,28 +232,19 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         then the views are concatenated). A bare array has normals oriented away from its centroid.
     config : PoseConfig, optional
     """
-    from ..descriptors import compute_fpfh, estimate_normals
+    from ..descriptors import compute_fpfh
     from ..segmentation.voxel import voxel_downsample
 
     cfg = config or PoseConfig()
+    if not isinstance(cfg, PoseConfig):
+        raise InputError(f"The 'config' argument of prepare_pose_model must be a PoseConfig. Got {type(cfg).__name__} instead.")
     views = _as_views(model)
-    pts_all, coarse_pts, coarse_nrm = [], [], []
-    for pts, vp, given in views:
-        down = voxel_downsample(pts, cfg.voxel_m)
-        if given is not None:  # normals given (e.g. mesh samples): those of the nearest original points
-            nr = given[cKDTree(pts).query(down)[1]]
-        elif vp is None:
-            nr = estimate_normals(down, radius_m=cfg.normal_radius_m).normals_xyz
-            out = np.einsum("ij,ij->i", nr, down - down.mean(axis=0)) < 0
-            nr[out] *= -1.0
-        else:
-            nr = estimate_normals(down, radius_m=cfg.normal_radius_m, viewpoint_xyz_m=vp).normals_xyz
-        pts_all.append(pts)
-        coarse_pts.append(down)
-        coarse_nrm.append(nr)
-    pts = np.vstack(pts_all)
-    down, nrm = np.vstack(coarse_pts), np.vstack(coarse_nrm)
-    feats = compute_fpfh(down, nrm, radius_m=cfg.feature_radius_m)
+    pts = np.vstack([v[0] for v in views])
+    down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m)
+    feats = ftree = None
+    if cfg.coarse_method == "ransac":
+        feats = compute_fpfh(down, nrm, radius_m=cfg.feature_radius_m)
+        ftree = cKDTree(feats)
     icp_pts = voxel_downsample(pts, cfg.model_icp_voxel_m) if cfg.model_icp_voxel_m > 0 else pts
     if len(icp_pts) < 10 or len(down) < 3:
         raise RegistrationError(f"The object model has too few points ({len(icp_pts)}) for pose estimation.")
@@ -198,7 +254,36 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         cloud = small_gicp.PointCloud(icp_pts)
         small_gicp.estimate_normals(cloud, num_neighbors=cfg.model_normals_k)
         normals = np.ascontiguousarray(cloud.normals()[:, :3])
-    return PoseModel(pts, down, feats, cKDTree(down), cKDTree(feats), target, normals, cfg)
+    vis_pts, vis_nrm = _oriented_samples(views, cfg.visibility_voxel_m, max(cfg.normal_radius_m, 1.5 * cfg.visibility_voxel_m))
+    ok = np.isfinite(vis_nrm).all(axis=1)
+    vis_pts, vis_nrm = vis_pts[ok], vis_nrm[ok]
+    if len(views) > 1:  # fused views overlap: one sample per voxel (normal of the nearest view sample)
+        merged = voxel_downsample(vis_pts, cfg.visibility_voxel_m)
+        vis_pts, vis_nrm = merged, vis_nrm[cKDTree(vis_pts).query(merged)[1]]
+    return PoseModel(pts, down, feats, cKDTree(down), ftree, target, normals, cfg,
+                     distance_field=DistanceField.build(icp_pts, cell_m=cfg.field_cell_m),
+                     visibility_points=np.ascontiguousarray(vis_pts), visibility_normals=np.ascontiguousarray(vis_nrm),
+                     rotations=so3_grid(cfg.n_rotations), radius_m=float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1)))))
+
+
+def _oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Voxelised points of every view with normals oriented outwards (towards the view's viewpoint)."""
+    from ..descriptors import estimate_normals
+    from ..segmentation.voxel import voxel_downsample
+
+    out_p, out_n = [], []
+    for pts, vp, given in views:
+        down = voxel_downsample(pts, leaf_m)
+        if given is not None:  # normals given (e.g. mesh samples): those of the nearest original points
+            nr = given[cKDTree(pts).query(down)[1]]
+        elif vp is None:
+            nr = estimate_normals(down, radius_m=radius_m).normals_xyz
+            nr[np.einsum("ij,ij->i", nr, down - down.mean(axis=0)) < 0] *= -1.0
+        else:
+            nr = estimate_normals(down, radius_m=radius_m, viewpoint_xyz_m=vp).normals_xyz
+        out_p.append(down)
+        out_n.append(nr)
+    return np.vstack(out_p), np.vstack(out_n)
 
 
 def estimate_object_pose(
@@ -217,7 +302,7 @@ def estimate_object_pose(
     Parameters
     ----------
     cluster_points_scanner : PointCloud or array-like (N, 3)
-        The segmented cluster in the scanner frame (metres). A PointCloud's viewpoint orients its normals.
+        The segmented cluster in the scanner frame (metres). A PointCloud's viewpoint is the scanner origin.
     model_points_object : PoseModel, PointCloud, sequence of PointCloud or array-like (M, 3)
         The class model in the object frame; pass a :class:`PoseModel` to reuse its preparation.
     symmetry : Symmetry, optional
@@ -226,14 +311,14 @@ def estimate_object_pose(
     config : PoseConfig, optional
         Ignored when a PoseModel is given (the model's config is used).
     seed : int or numpy Generator
-        RANSAC seed (reproducible).
+        RANSAC seed (``coarse_method="ransac"``; the grid search is deterministic).
     viewpoint_xyz_m : array-like (3,)
         Scanner origin in the scanner frame when the cluster is an array.
     canonical_reference : optional
         Passed to :meth:`Symmetry.canonicalize` (rotation for discrete, direction for continuous; scanner frame).
     init_T_scanner_object : array-like (4, 4) or RigidTransform, optional
-        A prior pose (e.g. predicted from the map by the SLAM): the features and the RANSAC are skipped
-        and ICP starts from it.
+        A prior pose (e.g. predicted from the map by the SLAM): the global search is skipped and ICP
+        starts from it.
 
     Returns
     -------
@@ -256,27 +341,111 @@ def estimate_object_pose(
     else:
         cluster = as_float_array("cluster_points_scanner", cluster_points_scanner, (None, 3), caller=_CALLER)
         vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=_CALLER)
+    vp = np.asarray(vp, dtype=np.float64)
     if len(cluster) < cfg.min_points:
         raise RegistrationError(f"The cluster given to {_CALLER} has {len(cluster)} points; at least "
                                 f"{cfg.min_points} are needed (PoseConfig.min_points).")
     t1 = time.perf_counter()
+    margin, vis, extras = float("nan"), float("nan"), {}
     if init_T_scanner_object is not None:
         T_prior = init_T_scanner_object if isinstance(init_T_scanner_object, RigidTransform) else \
             RigidTransform(init_T_scanner_object)
-        coarse = RegistrationResult(T_prior.inverse(), float("nan"), float("nan"), 0, True, method="prior")
+        fine = _refine(cluster, model, cfg, T_prior.inverse().matrix)
+        coarse_ok, coarse_fitness = True, float("nan")
         t2 = t3 = time.perf_counter()
-        n_voxels = 0
+    elif cfg.coarse_method == "ransac":
+        coarse, n_voxels, t2, _ = _coarse_ransac(cluster, vp, model, cfg, seed)
+        fine = _refine(cluster, model, cfg, coarse.T_target_source.matrix)
+        coarse_ok, coarse_fitness = coarse.converged, coarse.fitness
+        extras = {"coarse": coarse.to_dict(), "n_voxels": n_voxels}
+        t3 = time.perf_counter()
     else:
-        coarse, n_voxels, t2, t3 = _coarse(cluster, vp, model, cfg, seed)
-    init = coarse.T_target_source
+        fine, vis, margin, extras, t2 = _grid_search(cluster, vp, model, cfg, sym)
+        coarse_ok, coarse_fitness = True, extras["coarse_fitness"]
+        t3 = time.perf_counter()
+    T_os = fine.T_target_source.matrix  # T_object_scanner
+    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference)
+    T_so_can = cov[1]
+    cov = cov[0]
+    t4 = time.perf_counter()
+    reliable = bool(coarse_ok and fine.fitness >= cfg.min_fitness and fine.inlier_rmse_m <= cfg.max_rmse_m)
+    if np.isfinite(vis):
+        reliable = reliable and vis <= cfg.max_visibility and margin >= cfg.min_score_margin
+    return PoseEstimate(
+        T_scanner_object=RigidTransform(T_so_can), covariance_6x6=cov, fitness=fine.fitness,
+        rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=coarse_fitness,
+        icp_converged=fine.converged, residual_sigma_m=float(np.sqrt(sigma2)), visibility=vis, score_margin=margin,
+        timings_ms={"coarse": 1e3 * (t2 - t1), "icp": 1e3 * (t3 - t2), "covariance": 1e3 * (t4 - t3),
+                    "total": 1e3 * (t4 - t0)},
+        extras=extras,
+    )
+
+
+def _refine(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray) -> RegistrationResult:
+    """Wide then fine ICP of the cluster onto the model from ``T_init`` (``T_object_scanner``)."""
+    init = T_init
     if cfg.icp_wide_correspondence_m > 0:
         init = align_icp(cluster, model.icp_target, init_T=init, max_correspondence_m=cfg.icp_wide_correspondence_m,
                          max_iterations=cfg.icp_max_iterations).T_target_source
-    fine = align_icp(cluster, model.icp_target, init_T=init,
-                     max_correspondence_m=cfg.icp_max_correspondence_m, max_iterations=cfg.icp_max_iterations)
-    t4 = time.perf_counter()
-    T_os = fine.T_target_source.matrix  # T_object_scanner
-    # covariance: point-to-plane information of the final correspondences (object frame)
+    return align_icp(cluster, model.icp_target, init_T=init, max_correspondence_m=cfg.icp_max_correspondence_m,
+                     max_iterations=cfg.icp_max_iterations)
+
+
+def _final_score(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,
+                 ) -> tuple[float, float]:
+    """Fit and visibility costs of a refined hypothesis (exact nearest model points)."""
+    p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
+    d = model.icp_target.tree.query(p, k=1, distance_upper_bound=cfg.fit_tau_m)[0]
+    fit = float(np.mean(np.minimum(d, cfg.fit_tau_m) ** 2)) / cfg.fit_tau_m ** 2
+    vis = float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
+                                      model.visibility_normals, cfg.visibility_tol_m)[0])
+    return fit, vis
+
+
+def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
+    """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score."""
+    from ..segmentation.voxel import voxel_downsample
+
+    if model.distance_field is None:
+        raise InputError(f"The model given to {_CALLER} was prepared without a distance field; prepare it with "
+                         "coarse_method='grid'.")
+    pts = voxel_downsample(cluster, cfg.search_voxel_m)
+    if len(pts) < 3:
+        pts = cluster
+    hyps, image = search_hypotheses(
+        pts, vp, model.distance_field, model.rotations, model.visibility_points, model.visibility_normals,
+        object_radius_m=model.radius_m, symmetry=sym, image_cell_m=cfg.image_cell_m, tau_m=cfg.fit_tau_m,
+        visibility_weight=cfg.visibility_weight, visibility_tol_m=cfg.visibility_tol_m, n_keep=cfg.n_refine,
+        n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points)
+    t2 = time.perf_counter()
+    refined = []
+    for h in hyps:  # ICP of the search points (fast), scored on the whole cluster
+        r = align_icp(pts, model.icp_target, init_T=h.T_object_scanner, max_correspondence_m=cfg.icp_wide_correspondence_m
+                      or cfg.icp_max_correspondence_m, max_iterations=cfg.icp_max_iterations)
+        fit, vis = _final_score(cluster, image, model, cfg, r.T_target_source.matrix)
+        refined.append((fit + cfg.visibility_weight * vis, fit, vis, r, h))
+    refined.sort(key=lambda x: x[0])
+    best = refined[0]
+    final = align_icp(cluster, model.icp_target, init_T=best[3].T_target_source,
+                      max_correspondence_m=cfg.icp_max_correspondence_m, max_iterations=cfg.icp_max_iterations)
+    Tb = best[3].T_target_source.matrix
+    margin = float("inf")
+    for other in refined[1:]:
+        To = other[3].T_target_source.matrix
+        rot = rotation_distances(Tb[:3, :3], To[None, :3, :3], sym)[0]
+        # positions of the object origin in the scanner frame
+        dt = np.linalg.norm(Tb[:3, :3].T @ Tb[:3, 3] - To[:3, :3].T @ To[:3, 3])
+        if rot > np.radians(10.0) or dt > 0.01:
+            margin = other[0] - best[0]
+            break
+    extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
+              "n_hypotheses": len(model.rotations), "search_points": len(pts),
+              "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined]}
+    return final, best[2], margin, extras, t2
+
+
+def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os: np.ndarray, canonical_reference):
+    """Canonicalised ``T_scanner_object`` and its xyz-rpy covariance from the point-to-plane information."""
     p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
     d, j = model.icp_target.tree.query(p, k=1, distance_upper_bound=cfg.icp_max_correspondence_m)
     ok = np.isfinite(d)
@@ -299,26 +468,40 @@ def estimate_object_pose(
         C_delta = tangent_covariance(B @ info @ B.T, sigma2, inflation=cfg.covariance_inflation,
                                      unobservable_rotation_axes=sym.unobservable_axes,
                                      unobservable_variance_rad2=cfg.unobservable_variance_rad2)
+        C_delta = _apply_floor(C_delta, cfg)
         cov = xyz_rpy_covariance_of_inverse(np.linalg.inv(T_so_can), C_delta)
+        if _STORE_COVARIANCE_TERMS:  # calibration (benchmarks/pose_accuracy.py --calibrate): cov is linear in these
+            base = tangent_covariance(B @ info @ B.T, sigma2, unobservable_rotation_axes=sym.unobservable_axes,
+                                      unobservable_variance_rad2=0.0)
+            Ts = np.linalg.inv(T_so_can)
+            E = np.zeros((2, 6, 6))
+            E[0, :3, :3] = E[1, 3:, 3:] = np.eye(3)
+            U = tangent_covariance(np.eye(6), 1.0, unobservable_rotation_axes=sym.unobservable_axes,
+                                   unobservable_variance_rad2=cfg.unobservable_variance_rad2) - \
+                tangent_covariance(np.eye(6), 1.0, unobservable_rotation_axes=sym.unobservable_axes,
+                                   unobservable_variance_rad2=0.0)
+            _COVARIANCE_TERMS.append([xyz_rpy_covariance_of_inverse(Ts, M) for M in (base, U, E[0], E[1])])
     else:
         cov = np.diag([1e2, 1e2, 1e2, 1e4, 1e4, 1e4])
-    t5 = time.perf_counter()
-    reliable = bool(coarse.converged and fine.fitness >= cfg.min_fitness and fine.inlier_rmse_m <= cfg.max_rmse_m)
-    return PoseEstimate(
-        T_scanner_object=RigidTransform(T_so_can), covariance_6x6=cov, fitness=fine.fitness,
-        rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=coarse.fitness,
-        icp_converged=fine.converged, residual_sigma_m=float(np.sqrt(sigma2)),
-        timings_ms={"features": 1e3 * (t2 - t1), "coarse": 1e3 * (t3 - t2), "icp": 1e3 * (t4 - t3),
-                    "covariance": 1e3 * (t5 - t4), "total": 1e3 * (t5 - t0)},
-        extras={"coarse": coarse.to_dict(), "n_voxels": n_voxels},
-    )
+    return (cov, T_so_can), sigma2
 
 
-def _coarse(cluster, vp, model: PoseModel, cfg: PoseConfig, seed):
+def _apply_floor(C: np.ndarray, cfg: PoseConfig) -> np.ndarray:
+    """Add the variance floors (isotropic per block) so no direction is over-confident."""
+    out = C.copy()
+    out[:3, :3] += cfg.min_sigma_translation_m ** 2 * np.eye(3)
+    out[3:, 3:] += cfg.min_sigma_rotation_rad ** 2 * np.eye(3)
+    return out
+
+
+def _coarse_ransac(cluster, vp, model: PoseModel, cfg: PoseConfig, seed):
     """FPFH of the voxelised cluster and prerejective RANSAC onto the model (from the centroid guess)."""
     from ..descriptors import compute_fpfh, estimate_normals
     from ..segmentation.voxel import voxel_downsample
 
+    if model.coarse_features is None:
+        raise InputError(f"The model given to {_CALLER} was prepared without FPFH features; prepare it with "
+                         "coarse_method='ransac'.")
     down = voxel_downsample(cluster, cfg.voxel_m)
     if len(down) < 3:
         raise RegistrationError(f"The cluster given to {_CALLER} has {len(down)} voxels of {cfg.voxel_m} m; at least 3 are needed.")

@@ -1,0 +1,154 @@
+"""Numba kernels of the global pose search (see :mod:`.search`). Don't call these directly.
+
+Conventions: a hypothesis is ``T_object_scanner = (R, t)`` mapping cluster points (scanner frame) into the
+object frame, ``q = R p + t``. The model's distance field is a regular grid (origin ``origin``, cell
+``cell_m``) holding, per cell, the offset from the cell centre to the nearest model point as int8 in units
+of ``quantum_m`` (-128 when farther than the field's truncation): 3 bytes per cell, so that the grid
+stays in the CPU cache (the lookups are random accesses).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cell_nearest(q0, q1, q2, origin, inv_cell, nx, ny, nz, nearest):
+    """(found, x, y, z) of the nearest model point of the cell of (q0, q1, q2); ``origin`` (5,) is the grid
+    origin, the cell and the quantum."""
+    fi = (q0 - origin[0]) * inv_cell
+    fj = (q1 - origin[1]) * inv_cell
+    fk = (q2 - origin[2]) * inv_cell
+    if fi < 0.0 or fj < 0.0 or fk < 0.0:
+        return -1, 0.0, 0.0, 0.0
+    i, j, k = int(fi), int(fj), int(fk)
+    if i >= nx or j >= ny or k >= nz:
+        return -1, 0.0, 0.0, 0.0
+    o0 = nearest[i, j, k, 0]
+    if o0 == -128:
+        return -1, 0.0, 0.0, 0.0
+    c, qm = origin[3], origin[4]
+    return (1, origin[0] + (i + 0.5) * c + o0 * qm, origin[1] + (j + 0.5) * c + nearest[i, j, k, 1] * qm,
+            origin[2] + (k + 0.5) * c + nearest[i, j, k, 2] * qm)
+
+
+@njit(cache=True)
+def field_nearest(points, params, nearest):
+    """Stored nearest model point (N, 3) of each point's cell, NaN outside the field."""
+    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
+    inv = 1.0 / params[3]
+    out = np.full((points.shape[0], 3), np.nan)
+    for n in range(points.shape[0]):
+        ok, x, y, z = _cell_nearest(points[n, 0], points[n, 1], points[n, 2], params, inv, nx, ny, nz, nearest)
+        if ok > 0:
+            out[n, 0], out[n, 1], out[n, 2] = x, y, z
+    return out
+
+
+@njit(cache=True)
+def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
+    """Translation-only alignment of every hypothesis, then its fit cost.
+
+    ``Rs`` (H, 3, 3), ``ts`` (H, 3) (updated in place), ``src`` (N, 3) scanner-frame points, ``origin``
+    the field's (origin x y z, cell, quantum), ``nearest`` its int8 offsets. For each
+    truncation in ``truncations`` one step moves ``t`` by the mean offset to the nearest model points of the
+    source points within that truncation. Returns the fit cost (H,) =
+    ``mean_i min(d_i, tau)^2 / tau^2`` in [0, 1] (points outside the field count as ``tau``).
+    """
+    H, N = Rs.shape[0], src.shape[0]
+    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
+    inv = 1.0 / cell_m
+    cost = np.empty(H)
+    q = np.empty((N, 3))
+    for h in range(H):
+        R = Rs[h]
+        for n in range(N):
+            for a in range(3):
+                q[n, a] = R[a, 0] * src[n, 0] + R[a, 1] * src[n, 1] + R[a, 2] * src[n, 2]
+        t0, t1, t2 = ts[h, 0], ts[h, 1], ts[h, 2]
+        for it in range(truncations.shape[0]):
+            tr2 = truncations[it] * truncations[it]
+            s0 = s1 = s2 = 0.0
+            cnt = 0
+            for n in range(N):
+                p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
+                ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+                if ok < 0:
+                    continue
+                d0, d1, d2 = x - p0, y - p1, z - p2
+                if d0 * d0 + d1 * d1 + d2 * d2 <= tr2:
+                    s0 += d0
+                    s1 += d1
+                    s2 += d2
+                    cnt += 1
+            if cnt == 0:
+                break
+            t0 += s0 / cnt
+            t1 += s1 / cnt
+            t2 += s2 / cnt
+        ts[h, 0], ts[h, 1], ts[h, 2] = t0, t1, t2
+        tau2 = tau_m * tau_m
+        c = 0.0
+        for n in range(N):
+            p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
+            ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+            if ok < 0:
+                c += 1.0
+            else:
+                d2 = (x - p0) ** 2 + (y - p1) ** 2 + (z - p2) ** 2
+                c += min(d2, tau2) / tau2
+        cost[h] = c / N
+    return cost
+
+
+@njit(cache=True)
+def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m):
+    """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
+
+    A model point (object frame) is mapped into the scanner frame by the inverse hypothesis; it is
+    predicted visible when its normal faces the viewpoint. Its ray is projected on the cluster's range
+    image (gnomonic, rows of ``F`` = image axes, z = mean ray; cell ``1 / inv_cell_uv``; ``range_min``
+    (nu, nv) = smallest observed range around each cell, inf where nothing was observed). It contradicts
+    the scan when its cell saw nothing (it should have been seen) or when it lies more than ``tol_m``
+    in front of the observed surface (free space).
+    """
+    H, M = Rs.shape[0], model_pts.shape[0]
+    nu, nv = range_min.shape[0], range_min.shape[1]
+    out = np.empty(H)
+    for h in range(H):
+        R = Rs[h]
+        n_front = 0
+        n_bad = 0
+        for m in range(M):
+            # p_s = R^T (p_o - t), n_s = R^T n_o
+            a0 = model_pts[m, 0] - ts[h, 0]
+            a1 = model_pts[m, 1] - ts[h, 1]
+            a2 = model_pts[m, 2] - ts[h, 2]
+            r0 = R[0, 0] * a0 + R[1, 0] * a1 + R[2, 0] * a2 - viewpoint[0]
+            r1 = R[0, 1] * a0 + R[1, 1] * a1 + R[2, 1] * a2 - viewpoint[1]
+            r2 = R[0, 2] * a0 + R[1, 2] * a1 + R[2, 2] * a2 - viewpoint[2]
+            n0 = R[0, 0] * model_nrm[m, 0] + R[1, 0] * model_nrm[m, 1] + R[2, 0] * model_nrm[m, 2]
+            n1 = R[0, 1] * model_nrm[m, 0] + R[1, 1] * model_nrm[m, 1] + R[2, 1] * model_nrm[m, 2]
+            n2 = R[0, 2] * model_nrm[m, 0] + R[1, 2] * model_nrm[m, 1] + R[2, 2] * model_nrm[m, 2]
+            if n0 * r0 + n1 * r1 + n2 * r2 >= 0.0:  # facing away from the scanner
+                continue
+            n_front += 1
+            z = F[2, 0] * r0 + F[2, 1] * r1 + F[2, 2] * r2
+            if z <= 1e-9:
+                n_bad += 1
+                continue
+            u = (F[0, 0] * r0 + F[0, 1] * r1 + F[0, 2] * r2) / z
+            v = (F[1, 0] * r0 + F[1, 1] * r1 + F[1, 2] * r2) / z
+            i = int(np.floor((u - u0) * inv_cell_uv))
+            j = int(np.floor((v - v0) * inv_cell_uv))
+            if i < 0 or j < 0 or i >= nu or j >= nv:
+                n_bad += 1
+                continue
+            ro = range_min[i, j]
+            if not np.isfinite(ro):
+                n_bad += 1
+            elif np.sqrt(r0 * r0 + r1 * r1 + r2 * r2) < ro - tol_m:
+                n_bad += 1
+        out[h] = n_bad / max(n_front, 1)
+    return out

@@ -1,0 +1,203 @@
+"""Global pose search of a partial scan of a known object: a deterministic SO(3) grid of orientations,
+a translation aligned per orientation on a precomputed distance field of the model, and a score that
+adds a visibility (free-space) term to the fit.
+
+The fit alone cannot separate the near-ambiguous flips of partial views of pipe fittings (a 180-degree
+flip of a tee fits its visible half almost as well). The visibility term can: under a wrong
+orientation the model predicts surface where the scanner saw nothing (or in front of what it saw).
+
+* :func:`so3_grid`: super-Fibonacci rotations (Alexa, CVPR 2022), nearly uniform and deterministic.
+* :class:`DistanceField`: per-cell nearest model point on a regular grid (object frame).
+* :class:`RangeImage`: the cluster's smallest observed range per angular cell (scanner frame).
+* :func:`search_hypotheses`: every grid orientation scored; returns the best distinct hypotheses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from .._validation import check_int
+from ..symmetry import Symmetry
+from . import _search_kernels as K
+
+_PSI = 1.533751168755204288118041  # super-Fibonacci constant (Alexa 2022)
+
+
+def so3_grid(n: int) -> np.ndarray:
+    """``n`` nearly uniform, deterministic rotations ``(n, 3, 3)`` (super-Fibonacci spiral on S^3)."""
+    n = check_int("n", n, caller="so3_grid", minimum=1)
+    s = np.arange(n) + 0.5
+    r, R = np.sqrt(s / n), np.sqrt(1.0 - s / n)
+    a, b = 2.0 * np.pi * s / np.sqrt(2.0), 2.0 * np.pi * s / _PSI
+    quat_xyzw = np.column_stack([r * np.sin(a), r * np.cos(a), R * np.sin(b), R * np.cos(b)])
+    return Rotation.from_quat(quat_xyzw).as_matrix()
+
+
+@dataclass(frozen=True, eq=False)
+class DistanceField:
+    """Nearest model point per grid cell (object frame), compact: ``offsets (nx, ny, nz, 3)`` int8 = nearest
+    point minus cell centre in units of ``quantum_m`` (-128: farther than ``truncation_m``). Cell ``cell_m``,
+    grid origin ``origin`` (3,)."""
+
+    origin: np.ndarray
+    cell_m: float
+    offsets: np.ndarray
+    truncation_m: float
+    quantum_m: float
+
+    @classmethod
+    def build(cls, points_object: np.ndarray, *, cell_m: float = 0.0025, margin_m: float = 0.03,
+              truncation_m: float = 0.03) -> "DistanceField":
+        quantum = max(truncation_m + cell_m, 1e-6) / 126.0
+        lo = points_object.min(axis=0) - margin_m
+        hi = points_object.max(axis=0) + margin_m
+        dims = np.ceil((hi - lo) / cell_m).astype(int)
+        axes = [lo[a] + cell_m * (np.arange(dims[a]) + 0.5) for a in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        d, j = cKDTree(points_object).query(centres, k=1, distance_upper_bound=truncation_m)
+        off = np.full((len(centres), 3), -128, dtype=np.int8)
+        ok = np.isfinite(d)
+        off[ok] = np.clip(np.rint((points_object[j[ok]] - centres[ok]) / quantum), -127, 127).astype(np.int8)
+        return cls(lo, float(cell_m), off.reshape(*dims, 3), float(truncation_m), float(quantum))
+
+    @property
+    def params(self) -> np.ndarray:
+        """``(origin x y z, cell, quantum)``, as the kernels take them."""
+        return np.array([*self.origin, self.cell_m, self.quantum_m])
+
+    def nearest_points(self, points_object: np.ndarray) -> np.ndarray:
+        """The stored nearest model point (N, 3) of each point's cell (NaN outside the field)."""
+        return K.field_nearest(np.ascontiguousarray(points_object, dtype=np.float64), self.params, self.offsets)
+
+
+@dataclass(frozen=True, eq=False)
+class RangeImage:
+    """The cluster's smallest observed range around each angular cell (gnomonic image about its mean
+    ray). ``F`` (3, 3): rows = image u, v axes and the mean ray; ``range_min`` (nu, nv), inf = unseen."""
+
+    viewpoint: np.ndarray
+    F: np.ndarray
+    u0: float
+    v0: float
+    cell: float
+    range_min: np.ndarray
+
+    @classmethod
+    def build(cls, points: np.ndarray, viewpoint: np.ndarray, *, cell_m: float, margin_m: float = 0.1,
+              dilate: int = 1) -> "RangeImage":
+        rays = points - viewpoint
+        rng = np.linalg.norm(rays, axis=1)
+        z = rays.mean(axis=0)
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        F = np.vstack([x, np.cross(z, x), z])
+        q = rays @ F.T
+        uv = q[:, :2] / q[:, 2:3]
+        cell = cell_m / float(np.median(rng))
+        margin = margin_m / float(np.median(rng))
+        lo = uv.min(axis=0) - margin
+        dims = np.ceil((uv.max(axis=0) + margin - lo) / cell).astype(int) + 1
+        ij = np.floor((uv - lo) / cell).astype(int)
+        img = np.full(dims, np.inf)
+        np.minimum.at(img, (ij[:, 0], ij[:, 1]), rng)
+        if dilate > 0:  # smallest range over the (2 d + 1)^2 neighbourhood: tolerate sampling holes
+            pad = np.pad(img, dilate, constant_values=np.inf)
+            out = img.copy()
+            for di in range(-dilate, dilate + 1):
+                for dj in range(-dilate, dilate + 1):
+                    out = np.minimum(out, pad[dilate + di:dilate + di + dims[0], dilate + dj:dilate + dj + dims[1]])
+            img = out
+        return cls(np.asarray(viewpoint, dtype=np.float64), F, float(lo[0]), float(lo[1]), float(cell), img)
+
+    def visibility_cost(self, Rs: np.ndarray, ts: np.ndarray, model_pts: np.ndarray, model_nrm: np.ndarray,
+                        tol_m: float) -> np.ndarray:
+        """Share (H,) of the model points predicted visible under each hypothesis that contradict the scan."""
+        return K.visibility_cost(np.ascontiguousarray(Rs), np.ascontiguousarray(ts), model_pts, model_nrm,
+                                 self.viewpoint, self.F, self.u0, self.v0, 1.0 / self.cell, self.range_min, float(tol_m))
+
+
+@dataclass(frozen=True, eq=False)
+class Hypothesis:
+    """A pose hypothesis ``T_object_scanner`` (4, 4) with its fit, visibility and total costs."""
+
+    T_object_scanner: np.ndarray
+    fit: float
+    visibility: float
+    score: float
+
+
+def rotation_distances(R_a: np.ndarray, R_bs: np.ndarray, symmetry: Symmetry) -> np.ndarray:
+    """Angles (K,) between the object orientations ``R_a^T`` and ``R_bs[k]^T`` modulo the symmetry, for
+    ``R`` = rotations of ``T_object_scanner`` (the object's orientation in the scanner is ``R^T``)."""
+    return pairwise_rotation_distances(np.asarray(R_a)[None], np.asarray(R_bs), symmetry)[0]
+
+
+def pairwise_rotation_distances(R_as: np.ndarray, R_bs: np.ndarray, symmetry: Symmetry) -> np.ndarray:
+    """Angles (A, B) between ``R_as[i]^T`` and ``R_bs[j]^T`` modulo the symmetry (see :func:`rotation_distances`)."""
+    if symmetry.kind == "continuous":
+        a = symmetry.axis_object
+        ua, ub = np.einsum("i,kij->kj", a, R_as), np.einsum("i,kij->kj", a, R_bs)  # axes R^T a
+        return np.arccos(np.clip(ua @ ub.T, -1.0, 1.0))
+    tr = np.full((len(R_as), len(R_bs)), -1.0)
+    for S in symmetry.group_rotations():  # object frame: R_obj S  <=>  S^T R ; angle of S^T R_a R_b^T
+        tr = np.maximum(tr, np.einsum("aij,bij->ab", np.einsum("ji,ajk->aik", S, R_as), R_bs))
+    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+
+
+def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: DistanceField, rotations: np.ndarray,
+                      model_vis_pts: np.ndarray, model_vis_nrm: np.ndarray, *, object_radius_m: float,
+                      symmetry: Symmetry, image_cell_m: float, tau_m: float, visibility_weight: float,
+                      visibility_tol_m: float, truncations_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006),
+                      n_keep: int = 5, n_candidates: int = 512, n_coarse_points: int = 48,
+                      min_separation_rad: float = np.radians(20.0)) -> tuple[list[Hypothesis], RangeImage]:
+    """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
+    best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of
+    ``n_coarse_points`` of the points ranks all orientations; the ``n_candidates`` best are aligned and fitted
+    again with all the points and get the visibility term.
+
+    ``points`` (N, 3) is the (downsampled) cluster in the scanner frame. The translation starts with the
+    cluster's centroid mapped ``object_radius_m / 2`` from the object's origin towards the scanner and is
+    aligned by translation-only steps on the distance field (one per entry of ``truncations_m``).
+    """
+    c = points.mean(axis=0)
+    view = viewpoint - c
+    view /= max(np.linalg.norm(view), 1e-12)
+    Rs = np.ascontiguousarray(rotations, dtype=np.float64)
+    ts = np.ascontiguousarray(0.5 * object_radius_m * (Rs @ view) - Rs @ c)
+    # coarse to fine: every orientation with a few points, then the best n_candidates with all of them
+    sub = np.ascontiguousarray(points[np.linspace(0, len(points) - 1, min(len(points), n_coarse_points)).astype(int)])
+    K.align_and_score(Rs, ts, sub, field.params, field.cell_m, field.offsets,
+                      np.asarray(truncations_m[:-2], dtype=np.float64), float(tau_m))
+    fit0 = K.align_and_score(Rs, ts, sub, field.params, field.cell_m, field.offsets,
+                             np.zeros(0), float(tau_m))
+    cand = np.argsort(fit0, kind="stable")[:n_candidates]
+    Rs, ts = np.ascontiguousarray(Rs[cand]), np.ascontiguousarray(ts[cand])
+    fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets,
+                            np.asarray(truncations_m[-2:], dtype=np.float64), float(tau_m))
+    cand = np.arange(len(Rs))
+    # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
+    cand = np.argsort(fit, kind="stable")[:n_candidates]
+    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m)
+    vis = image.visibility_cost(Rs[cand], ts[cand], model_vis_pts, model_vis_nrm, visibility_tol_m)
+    score = fit[cand] + visibility_weight * vis
+    order = np.argsort(score, kind="stable")
+    D = pairwise_rotation_distances(Rs[cand[order]], Rs[cand[order]], symmetry)
+    kept: list[int] = []
+    for i in range(len(order)):
+        if kept and D[i, kept].min() < min_separation_rad:
+            continue
+        kept.append(i)
+        if len(kept) >= n_keep:
+            break
+    out = []
+    for i in kept:
+        j = cand[order[i]]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = Rs[j], ts[j]
+        out.append(Hypothesis(T, float(fit[j]), float(vis[order[i]]), float(score[order[i]])))
+    return out, image
