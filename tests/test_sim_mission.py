@@ -43,7 +43,7 @@ def tiny_mission():
 def long_nav():
     cfg = SimulatorConfig(
         trajectory=TrajectoryConfig(loops=8),
-        dvl=DvlConfig(rate_hz=10.0, outlier_prob=0.0, slope_outlier_prob=0.0, dropout_prob=0.05, slope_dropout_prob=0.2),
+        dvl=DvlConfig.white(rate_hz=10.0, outlier_prob=0.0, slope_outlier_prob=0.0, dropout_prob=0.05, slope_dropout_prob=0.2),
         ahrs=AhrsConfig(yaw_bias_rad=0.03),
         depth=DepthConfig(bias_m=0.05),
     )

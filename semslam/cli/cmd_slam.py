@@ -19,6 +19,8 @@ def register(subparsers, common) -> None:
     p.add_argument("--detections", help="JSON lines of Detection.to_dict() (default: truth-based detections)")
     p.add_argument("--config", help="JSON file of SlamConfig fields overriding the defaults")
     p.add_argument("--seed", type=int, default=0, help="seed of the truth-based detections (default 0)")
+    p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
+                   help="name of a mission object whose pose is known a priori (surveyed reference structure); repeatable")
     p.set_defaults(func=run)
 
     q = subparsers.add_parser("montecarlo", parents=[common], help="seeded Monte-Carlo evaluation of the filter modes",
@@ -30,6 +32,13 @@ def register(subparsers, common) -> None:
     q.add_argument("--loops", type=int, default=3, help="loops per mission (default 3)")
     q.add_argument("--source", choices=("auto", "simulator", "synthetic"), default="auto",
                    help="mission generator (auto: the simulator when available)")
+    q.add_argument("--yaw-bias-walk", type=float, default=0.0, metavar="DEG_PER_SQRT_S",
+                   help="random walk of the AHRS yaw bias of the missions (degrees per sqrt(s); default 0)")
+    q.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
+                   help="name of a mission object whose pose is known a priori (a surveyed reference structure, "
+                        "e.g. reducing_socket_0); repeatable")
+    q.add_argument("--white-dvl", action="store_true",
+                   help="missions with a white-noise-only DVL (no scale factor, misalignment or biases)")
     q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves")
     q.set_defaults(func=run_montecarlo_cmd)
 
@@ -68,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"The --config file {args.config!r} cannot be read as JSON: {exc}") from None
         if not isinstance(overrides, dict):
             raise ConfigError(f"The --config file {args.config!r} must hold a JSON object. Got {type(overrides).__name__} instead.")
+    if args.surveyed:
+        overrides["surveyed_objects"] = tuple(args.surveyed)
     cfg = SlamConfig.for_mission(mission, **overrides)
     dets = read_detections_jsonl(args.detections) if args.detections else None
     modes = MODES if args.mode == "all" else (args.mode,)
@@ -101,7 +112,9 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     modes = MODES if args.mode == "all" else (args.mode,)
     res = run_montecarlo(args.runs, modes=modes, yaw_bias_deg=args.yaw_bias_deg, seed=args.seed, source=args.source,
                          loops=args.loops, progress=None if getattr(args, "json", False) else
-                         (lambda s: print(s, file=sys.stderr)))
+                         (lambda s: print(s, file=sys.stderr)), yaw_bias_walk_deg_per_sqrt_s=args.yaw_bias_walk,
+                         white_dvl=args.white_dvl,
+                         config_overrides={"surveyed_objects": tuple(args.surveyed)} if args.surveyed else None)
     if args.out:
         write_montecarlo(res, args.out)
     emit(args, {"n_runs": res.n_runs, "summary": res.summary}, res.table)

@@ -8,8 +8,10 @@ Where the defaults come from:
   is triangulation-like: sigma = ``noise_floor_m + noise_range2_per_m * r**2`` along the camera ray.
 * Kinect: 640 x 480, f = 525 px, baseline 7.5 cm, disparity quantised to 1/8 px; depth error growing
   with the square of depth, sigma_z ~ 1.5e-3 * z**2 (Khoshelham & Elberink 2012).
-* Navigation sensors (design/slam-notes.md section 3): DVL 5 Hz, sigma = 0.3 % |v| + 1 mm/s per axis,
-  worse over the tank's sloped sides (the papers' observed drift); AHRS 20 Hz, Xsens MTi-300-like
+* Navigation sensors (design/slam-notes.md section 3): DVL 5 Hz, white sigma = 0.3 % |v| + 1 mm/s per
+  axis, worse over the tank's sloped sides (the papers' observed drift), plus a per-mission scale factor
+  (0.5 %) and yaw misalignment (0.5 deg) and a Gauss-Markov bias (3 mm/s, 20 s): ~1-2 % of distance
+  travelled of dead-reckoning drift (see :class:`DvlConfig`); AHRS 20 Hz, Xsens MTi-300-like
   0.2 / 0.2 / 1.0 degree white noise; pressure depth 10 Hz, 2 cm.
 
 Every config has ``to_dict`` / ``from_dict`` (JSON round trip, used for mission.json).
@@ -174,7 +176,10 @@ class KinectConfig(_Dict):
     """Kinect-like depth camera for the view database: views every 360/n degrees of azimuth around the
     object (in its most probable resting pose) at ``elevation_rad`` above the floor, ``distance_m`` from
     its centre of mass. Depth noise sigma_z = ``depth_noise_per_m * z**2``, applied in disparity and
-    quantised to ``disparity_step_px`` (f * baseline / z)."""
+    quantised to ``disparity_step_px`` (f * baseline / z).
+
+    The defaults are the papers' bench (45 degrees, 0.7 m). The built-in recognition database uses
+    :data:`semslam.simulation.kinect.SURVEY_KINECT` instead (75 degrees, 1.5 m: the survey geometry)."""
 
     width_px: int = 640
     height_px: int = 480
@@ -197,11 +202,34 @@ class KinectConfig(_Dict):
 
 @dataclass(frozen=True)
 class DvlConfig(_Dict):
-    """Doppler velocity log (body-frame velocity, bottom lock). Per-axis white noise sigma =
-    ``noise_rel`` * |v| + ``noise_abs_mps``. When any of the four Janus beams (``beam_angle_rad`` from
-    vertical) hits the sloped sides, sigma is multiplied by ``slope_noise_factor`` and the outlier and
-    dropout probabilities become the ``slope_*`` ones. An outlier adds N(0, ``outlier_std_mps``) per axis;
-    a dropout is an invalid (NaN) row."""
+    """Doppler velocity log (body-frame velocity, bottom lock).
+
+    Measurement model (body frame): ``z = (1 + k) Rz(delta) v + b(t) + n`` with
+
+    * ``k ~ N(0, scale_factor_sigma**2)`` drawn once per mission (sound-speed and beam-angle errors:
+      a 1 % sound-speed error is a ~1 % velocity scale error; "0.5 %V" long-term accuracy figures,
+      Tang et al. 2013; Water Linked A50 1 % / 0.1 %),
+    * ``delta ~ N(0, misalignment_sigma_rad**2)`` a yaw mounting misalignment drawn once per mission
+      (uncalibrated DVL-to-AHRS alignment errors of the order of a degree: Kinsey & Whitcomb 2007,
+      "In situ alignment calibration of attitude and Doppler sensors", IEEE JOE 32(2)),
+    * ``b(t)`` a first-order Gauss-Markov bias per axis (stationary std ``bias_sigma_mps``, correlation
+      time ``bias_tau_s``): the "+- x mm/s" term of DVL specifications (0.5 cm/s in Tang et al. 2013,
+      3 mm/s for a 120 kHz unit; design/slam-notes.md section 3), which does not average out over a
+      few seconds. Its correlation time (20 s: ~6 m of travel, bottom-texture and altitude dependent) is a
+      modelling assumption, not a datasheet figure. A body-fixed *constant* error (scale, misalignment, a
+      slow bias) cancels over every closed loop of the square; the 20 s bias does not, so that with the
+      defaults an AHRS + DVL dead reckoning drifts ~1 % of the distance travelled (slam-notes section 3:
+      1-2 % for an AHRS + DVL vehicle),
+    * ``n`` white noise per axis, sigma = ``noise_rel`` * |v| + ``noise_abs_mps``.
+
+    When any of the four Janus beams (``beam_angle_rad`` from vertical) hits the sloped sides, the white
+    sigma is multiplied by ``slope_noise_factor``, the outlier and dropout probabilities become the
+    ``slope_*`` ones, and a second Gauss-Markov bias (std ``slope_bias_sigma_mps``, correlation time
+    ``slope_bias_tau_s``) is driven; it decays with that time once the beams are back on the flat floor (the
+    papers: flying over the tank's ~73-degree slopes "is known to generate a significant noise on the DVL
+    readings" and caused most of their dead-reckoning drift; the magnitudes are assumptions). An outlier adds N(0, ``outlier_std_mps``) per axis; a dropout is an invalid
+    (NaN) row. Setting the four systematic terms to 0 gives a white-noise-only DVL.
+    """
 
     rate_hz: float = 5.0
     noise_rel: float = 0.003
@@ -214,11 +242,24 @@ class DvlConfig(_Dict):
     slope_outlier_prob: float = 0.05
     beam_angle_rad: float = math.radians(30.0)
     max_altitude_m: float = 30.0
+    scale_factor_sigma: float = 0.005
+    misalignment_sigma_rad: float = math.radians(0.5)
+    bias_sigma_mps: float = 0.003
+    bias_tau_s: float = 20.0
+    slope_bias_sigma_mps: float = 0.015
+    slope_bias_tau_s: float = 5.0
 
     def __post_init__(self) -> None:
-        _check(self, positive=("rate_hz", "slope_noise_factor", "max_altitude_m"),
-               nonneg=("noise_rel", "noise_abs_mps", "outlier_std_mps", "beam_angle_rad"),
+        _check(self, positive=("rate_hz", "slope_noise_factor", "max_altitude_m", "bias_tau_s", "slope_bias_tau_s"),
+               nonneg=("noise_rel", "noise_abs_mps", "outlier_std_mps", "beam_angle_rad", "scale_factor_sigma",
+                       "misalignment_sigma_rad", "bias_sigma_mps", "slope_bias_sigma_mps"),
                prob=("dropout_prob", "outlier_prob", "slope_dropout_prob", "slope_outlier_prob"))
+
+    @classmethod
+    def white(cls, **kw: Any) -> DvlConfig:
+        """A DVL with white noise only (no scale factor, misalignment or bias): the pre-realism model."""
+        return cls(**{"scale_factor_sigma": 0.0, "misalignment_sigma_rad": 0.0, "bias_sigma_mps": 0.0,
+                      "slope_bias_sigma_mps": 0.0, **kw})
 
 
 @dataclass(frozen=True)

@@ -34,9 +34,26 @@ def dvl_beams_over_slope(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad
     return over_slope(world, feet[..., 0], feet[..., 1]).any(axis=1)
 
 
+def gauss_markov(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator, dim: int = 3,
+                 driven: np.ndarray | None = None) -> np.ndarray:
+    """``n`` samples (n, dim) of a first-order Gauss-Markov process (std ``sigma``, correlation time
+    ``tau_s``) sampled every ``dt_s``: ``b_k = a b_(k-1) + w_k``, ``a = exp(-dt/tau)``,
+    ``w ~ N(0, sigma^2 (1 - a^2))``, ``b_0 ~ N(0, sigma^2)`` (exact discretisation, scipy lfilter).
+    With ``driven`` (n,) bool the noise enters only where True (the process decays elsewhere) and
+    ``b_0 = 0`` unless ``driven[0]``."""
+    from scipy.signal import lfilter
+
+    a = float(np.exp(-dt_s / tau_s))
+    w = rng.normal(0.0, 1.0, (n, dim)) * sigma * np.sqrt(1.0 - a * a)
+    w[0] = rng.normal(0.0, sigma, dim)
+    if driven is not None:
+        w[~np.asarray(driven, dtype=bool)] = 0.0
+    return lfilter([1.0], [1.0, -a], w, axis=0)
+
+
 def simulate_dvl(traj: Trajectory, world: WorldConfig, cfg: DvlConfig, rng: np.random.Generator) -> DvlLog:
-    """DVL log: body velocity + white noise (0.3 % |v| + 1 mm/s by default), worse over slopes, with
-    outliers and dropouts (NaN rows, ``valid`` False)."""
+    """DVL log: ``(1 + k) Rz(delta) v + b(t)`` + white noise (0.3 % |v| + 1 mm/s by default), worse over
+    slopes, with outliers and dropouts (NaN rows, ``valid`` False). See :class:`DvlConfig`."""
     t = sensor_stamps(cfg.rate_hz, traj.duration_s)
     truth = traj.sample(t)
     v = truth.velocity_body_mps
@@ -47,10 +64,16 @@ def simulate_dvl(traj: Trajectory, world: WorldConfig, cfg: DvlConfig, rng: np.r
     p_out = np.where(slope, cfg.slope_outlier_prob, cfg.outlier_prob)
     outlier = rng.random(len(t)) < p_out
     spikes = rng.normal(0.0, cfg.outlier_std_mps, v.shape)
-    meas = v + noise + np.where(outlier[:, None], spikes, 0.0)
     p_drop = np.where(slope, cfg.slope_dropout_prob, cfg.dropout_prob)
     altitude = floor_depth_m(world, truth.position_ned_m[:, 0], truth.position_ned_m[:, 1]) - truth.position_ned_m[:, 2]
     valid = (rng.random(len(t)) >= p_drop) & (altitude <= cfg.max_altitude_m)
+    # systematic errors (drawn after the white terms: a white-only config keeps its former draws)
+    k, delta = rng.normal(0.0, 1.0, 2) * (cfg.scale_factor_sigma, cfg.misalignment_sigma_rad)
+    bias = gauss_markov(len(t), 1.0 / cfg.rate_hz, cfg.bias_sigma_mps, cfg.bias_tau_s, rng)
+    bias += gauss_markov(len(t), 1.0 / cfg.rate_hz, cfg.slope_bias_sigma_mps, cfg.slope_bias_tau_s, rng, driven=slope)
+    c, s = np.cos(delta), np.sin(delta)
+    v_sys = (1.0 + k) * np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1], v[:, 2]]) + bias
+    meas = v_sys + noise + np.where(outlier[:, None], spikes, 0.0)
     meas[~valid] = np.nan
     return DvlLog(t, meas, valid)
 

@@ -147,18 +147,29 @@ def joseph_update(P, x, loc, Hc, nu, Rn):
 
 
 @njit(cache=True)
-def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw):
-    """In-place constant-velocity prediction of the vehicle rows of ``(x, P)``; returns ``F`` (nv, nv)."""
+def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw, i_yaw, i_dvl, dvl_a, dvl_q, slope_a, slope_q):
+    """In-place constant-velocity prediction of the vehicle rows of ``(x, P)``; returns ``F`` (nv, nv).
+
+    ``i_yaw`` / ``i_dvl``: index of the yaw-bias state / first DVL-calibration state (-1 when absent); the
+    DVL bias decays by ``dvl_a = exp(-dt / tau)`` and gains ``dvl_q = sigma^2 (1 - a^2)`` per axis, the DVL
+    slope bias (the next three states) likewise with ``slope_a`` / ``slope_q``.
+    """
     v = x[3:6].copy()
     d = R @ v * dt
     F = np.eye(nv)
     for i in range(3):
         for j in range(3):
             F[i, 3 + j] = R[i, j] * dt
-    if nv == 7:  # d p / d b = -[e_z]x d
-        F[0, 6] = d[1]
-        F[1, 6] = -d[0]
-        F[2, 6] = 0.0
+    if i_yaw >= 0:  # d p / d b = -[e_z]x d
+        F[0, i_yaw] = d[1]
+        F[1, i_yaw] = -d[0]
+        F[2, i_yaw] = 0.0
+    if i_dvl >= 0:
+        for i in range(3):
+            F[i_dvl + i, i_dvl + i] = dvl_a
+            x[i_dvl + i] *= dvl_a
+            F[i_dvl + 3 + i, i_dvl + 3 + i] = slope_a
+            x[i_dvl + 3 + i] *= slope_a
     for i in range(3):
         x[i] += d[i]
     n = P.shape[0]
@@ -178,8 +189,12 @@ def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw):
     for i in range(3):
         for j in range(3):
             Q[i, j] += Qa[i, j]
-    if nv == 7:
-        Q[6, 6] = bias_rw * bias_rw * dt
+    if i_yaw >= 0:
+        Q[i_yaw, i_yaw] = bias_rw * bias_rw * dt
+    if i_dvl >= 0:
+        for i in range(3):
+            Q[i_dvl + i, i_dvl + i] = dvl_q
+            Q[i_dvl + 3 + i, i_dvl + 3 + i] = slope_q
     for i in range(nv):
         for j in range(nv):
             P[i, j] += Q[i, j]

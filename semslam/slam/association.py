@@ -153,7 +153,7 @@ def innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurement, R_wv
     H[0:3, 0:3] = -Rt
     H[0:3, nv:nv + 3] = Rt
     if ekf.yaw_bias:
-        H[0:3, 6] = Rt @ kern.skew(_EZ) @ d
+        H[0:3, ekf.i_yaw] = Rt @ kern.skew(_EZ) @ d
     # noise: detection part (pos in vehicle frame, rotation rotated to world) + AHRS part
     J = np.zeros((6, 6))
     J[0:3, 0:3] = np.eye(3)
@@ -174,7 +174,7 @@ def innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurement, R_wv
         nu[3:6] = wrap_angle(rpy_from_rotation(R_meas) - l_rpy)
         H[3:6, nv + 3:nv + 6] = np.eye(3)
         if ekf.yaw_bias:
-            H[5, 6] = 1.0
+            H[5, ekf.i_yaw] = 1.0
     else:
         T = np.zeros((m, 6))
         T[0:3, 0:3] = np.eye(3)
@@ -184,7 +184,7 @@ def innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurement, R_wv
             nu[3:] = B.T @ kern.so3_log(R_meas @ R_l.T)
             H[3:, nv + 3:nv + 6] = B.T @ kern.rpy_to_world_rate(l_rpy)
             if ekf.yaw_bias:
-                H[3:, 6] = B.T @ _EZ
+                H[3:, ekf.i_yaw] = B.T @ _EZ
     N = 0.5 * (N + N.T)
     S = ekf.innovation_cov(idx, H, N)
     d2 = kern.mahalanobis2(nu, S)

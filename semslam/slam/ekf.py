@@ -1,8 +1,12 @@
 """The semantic EKF of Himri et al. (2018), with an exact *compressed* update for large maps.
 
-State ``x = [p (3), v (3), (b_yaw), l_1 (6), ..., l_N (6)]``: vehicle position in the world NED frame (m),
-body-frame velocity (m/s), optionally the AHRS yaw bias (rad; AHRS yaw = true yaw + b), and per landmark its
-world pose ``[x y z roll pitch yaw]`` (m, rad).
+State ``x = [p (3), v (3), (b_dvl (3), s_dvl (3), k_dvl, delta_dvl), (b_yaw), l_1 (6), ..., l_N (6)]``: vehicle
+position in the world NED frame (m), body-frame velocity (m/s), optionally the DVL calibration (body-frame
+Gauss-Markov biases b_dvl and s_dvl (m/s; s_dvl is driven only while the beams are on a slope), scale factor k
+and yaw misalignment delta (rad): DVL = ``(1 + k) Rz(delta) v + b_dvl + s_dvl``),
+optionally the AHRS yaw bias (rad; AHRS yaw = true yaw + b), and per landmark its world pose
+``[x y z roll pitch yaw]`` (m, rad). ``i_dvl`` / ``i_yaw`` give the first index of the optional blocks (-1 when
+absent).
 
 Cost that scales. Predictions and updates act on an *active* set ``A`` (the vehicle and the landmarks near
 it); the rest ``B`` of the map is kept in compressed form (Guivant & Nebot 2001, "compressed EKF"): three
@@ -50,14 +54,26 @@ class SemanticEkf:
     position_ned_m, velocity_body_mps : array-like of shape (3,)
         Initial mean.
     P0_vehicle : array of shape (n_v, n_v)
-        Initial vehicle covariance, ``n_v = 7`` with ``yaw_bias`` else 6.
+        Initial vehicle covariance, ``n_v = 6 + 8 * dvl_calibration + yaw_bias``.
     yaw_bias : bool
         Add the AHRS yaw-bias state.
+    dvl_calibration : bool
+        Add the DVL calibration states (bias (3), slope bias (3), scale factor, yaw misalignment); the biases
+        are first-order Gauss-Markov processes (``dvl_bias_*``, ``dvl_slope_bias_*``: std, correlation time).
     """
 
-    def __init__(self, position_ned_m, velocity_body_mps, P0_vehicle, *, yaw_bias: bool = False) -> None:
-        self.n_v = 7 if yaw_bias else 6
+    def __init__(self, position_ned_m, velocity_body_mps, P0_vehicle, *, yaw_bias: bool = False,
+                 dvl_calibration: bool = False, dvl_bias_sigma_mps: float = 0.0, dvl_bias_tau_s: float = 1e9,
+                 dvl_slope_bias_sigma_mps: float = 0.0, dvl_slope_bias_tau_s: float = 1e9) -> None:
+        self.i_dvl = 6 if dvl_calibration else -1
+        self.i_yaw = 6 + 8 * dvl_calibration if yaw_bias else -1
+        self.n_v = 6 + 8 * dvl_calibration + yaw_bias
+        self.dvl_slope_bias_sigma_mps = float(dvl_slope_bias_sigma_mps)
+        self.dvl_slope_bias_tau_s = float(dvl_slope_bias_tau_s)
         self.yaw_bias = yaw_bias
+        self.dvl_calibration = dvl_calibration
+        self.dvl_bias_sigma_mps = float(dvl_bias_sigma_mps)
+        self.dvl_bias_tau_s = float(dvl_bias_tau_s)
         P0 = np.asarray(P0_vehicle, dtype=float)
         if P0.shape != (self.n_v, self.n_v):
             raise SlamError(f"The 'P0_vehicle' argument of SemanticEkf must have shape ({self.n_v}, {self.n_v}). Got {P0.shape} instead.")
@@ -173,17 +189,21 @@ class SemanticEkf:
         return self.cov(self.landmarks[i].offset + np.arange(6))
 
     def yaw_bias_rad(self) -> float:
-        return float(self.xa[6]) if self.yaw_bias else 0.0
+        return float(self.xa[self.i_yaw]) if self.yaw_bias else 0.0
+
+    def dvl_calibration_state(self) -> np.ndarray:
+        """``[b (3), s (3) (m/s), k, delta (rad)]`` (zeros without the DVL calibration states)."""
+        return self.xa[self.i_dvl:self.i_dvl + 8].copy() if self.dvl_calibration else np.zeros(8)
 
     def true_attitude(self, R_wv_ahrs: np.ndarray) -> np.ndarray:
         """Vehicle rotation corrected by the estimated yaw bias: ``Rz(-b) R_ahrs``."""
         if not self.yaw_bias:
             return R_wv_ahrs
-        return kern.axis_rotation(_EZ, -self.xa[6]) @ R_wv_ahrs
+        return kern.axis_rotation(_EZ, -self.xa[self.i_yaw]) @ R_wv_ahrs
 
     # ------------------------------------------------------------------ prediction
     def predict(self, dt_s: float, R_wv_ahrs: np.ndarray, *, velocity_rw: float,
-                attitude_cov_world: np.ndarray | None = None, yaw_bias_rw: float = 0.0) -> None:
+                attitude_cov_world: np.ndarray | None = None, yaw_bias_rw: float = 0.0, dvl_on_slope: bool = False) -> None:
         """Constant-velocity prediction over ``dt_s`` with the AHRS attitude as input.
 
         ``p += R v dt``, ``v`` constant, landmarks static. Process noise: white acceleration of spectral
@@ -195,8 +215,12 @@ class SemanticEkf:
             return
         R = self.true_attitude(R_wv_ahrs)
         att = np.zeros((3, 3)) if attitude_cov_world is None else attitude_cov_world
+        a = float(np.exp(-dt_s / self.dvl_bias_tau_s))
+        a2 = float(np.exp(-dt_s / self.dvl_slope_bias_tau_s))
+        q2 = self.dvl_slope_bias_sigma_mps**2 * (1.0 - a2 * a2) if dvl_on_slope else 0.0
         F = kern.predict_vehicle(self.Paa, self.xa, np.ascontiguousarray(R), float(dt_s), float(velocity_rw) ** 2,
-                                 np.ascontiguousarray(att, dtype=float), self.n_v, float(yaw_bias_rw))
+                                 np.ascontiguousarray(att, dtype=float), self.n_v, float(yaw_bias_rw), self.i_yaw,
+                                 self.i_dvl, a, self.dvl_bias_sigma_mps**2 * (1.0 - a * a), a2, q2)
         if self.compressed:
             nv = self.n_v
             self._phi[:nv, :] = F @ self._phi[:nv, :]
@@ -233,7 +257,7 @@ class SemanticEkf:
     def _normalize_angles(self) -> None:
         nv = self.n_v
         if self.yaw_bias:
-            self.xa[6] = kern_wrap(self.xa[6])
+            self.xa[self.i_yaw] = kern_wrap(self.xa[self.i_yaw])
         nl = (len(self._A) - nv) // 6
         if nl == 0:
             return

@@ -22,19 +22,25 @@ from .metrics import anees, chi2_band, nees
 from .runner import MODES, SlamConfig, run_slam
 
 
-def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3):
-    """One mission for Monte-Carlo run ``seed`` (simulator if available, else the synthetic square)."""
+def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
+                 yaw_bias_walk_rad_per_sqrt_s: float = 0.0, white_dvl: bool = False):
+    """One mission for Monte-Carlo run ``seed`` (simulator if available, else the synthetic square).
+
+    ``white_dvl``: the simulator's DVL without its systematic errors (scale, misalignment, biases)."""
     if source in ("auto", "simulator"):
         try:
             from ..simulation import simulate_mission  # type: ignore[attr-defined]
-            from ..simulation.config import AhrsConfig, SimulatorConfig, TrajectoryConfig
+            from ..simulation.config import DvlConfig, SimulatorConfig
         except ImportError:
             if source == "simulator":
                 raise SlamError("semslam.simulation.simulate_mission is not available.") from None
         else:
             base = SimulatorConfig()
-            cfg = base.replace(ahrs=replace(base.ahrs, yaw_bias_rad=float(yaw_bias_rad)),
+            cfg = base.replace(ahrs=replace(base.ahrs, yaw_bias_rad=float(yaw_bias_rad),
+                                            yaw_bias_walk_rad_per_sqrt_s=float(yaw_bias_walk_rad_per_sqrt_s)),
                                trajectory=replace(base.trajectory, loops=loops))
+            if white_dvl:
+                cfg = cfg.replace(dvl=DvlConfig.white())
             return simulate_mission(cfg, seed=seed, with_scans=False)
     from .synthetic import square_mission
 
@@ -56,20 +62,38 @@ class MonteCarloResult:
 
     def table(self) -> str:
         """Markdown table of the summary."""
-        rows = ["| mode | ATE RMSE mean (m) | ATE max (m) | final err (m) | final 3-sigma (m) | max 3-sigma (m) | ANEES | band | epochs in band |",
-                "|---|---|---|---|---|---|---|---|---|"]
+        rows = ["| mode | ATE mean (m) | ATE max (m) | DR/mode ATE | final err (m) | 3-sigma at 1/3, 2/3, end (m) | "
+                "ANEES | band | epochs in band | landmark ANEES pos (band) | landmark ANEES pose (band) |",
+                "|---|---|---|---|---|---|---|---|---|---|---|"]
+
+        def lm(s, key):
+            v = s[key]
+            return "-" if v["n"] == 0 else f"{v['anees']:.2f} ([{v['band'][0]:.2f}, {v['band'][1]:.2f}], n={v['n']})"
+
         for mode in self.modes:
             s = self.summary[mode]
-            rows.append(f"| {mode} | {s['ate_rmse_mean_m']:.4f} | {s['ate_rmse_max_m']:.4f} | {s['final_error_mean_m']:.4f} | "
-                        f"{s['final_3sigma_mean_m']:.4f} | {s['max_3sigma_mean_m']:.4f} | {s['anees_mean']:.2f} | "
-                        f"[{s['band'][0]:.2f}, {s['band'][1]:.2f}] | {100 * s['fraction_in_band']:.0f} % |")
+            ratio = s.get("dr_over_mode_ate")
+            s3 = ", ".join(f"{x:.3f}" for x in s["sigma3_at_thirds_mean_m"])
+            rows.append(f"| {mode} | {s['ate_rmse_mean_m']:.4f} | {s['ate_rmse_max_m']:.4f} | "
+                        f"{'-' if ratio is None else f'{ratio:.2f}'} | {s['final_error_mean_m']:.4f} | {s3} | "
+                        f"{s['anees_mean']:.2f} | [{s['band'][0]:.2f}, {s['band'][1]:.2f}] | "
+                        f"{100 * s['fraction_in_band']:.0f} % | {lm(s, 'landmark_nees_position')} | "
+                        f"{lm(s, 'landmark_nees_pose')} |")
         return "\n".join(rows)
 
 
 def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_deg: float = 0.0, seed: int = 0,
                    source: str = "auto", loops: int = 3, config_overrides: dict | None = None,
-                   progress: Callable[[str], None] | None = None) -> MonteCarloResult:
-    """Run ``n_runs`` seeded missions in each of ``modes``; see the module docstring."""
+                   progress: Callable[[str], None] | None = None, yaw_bias_walk_deg_per_sqrt_s: float = 0.0,
+                   white_dvl: bool = False) -> MonteCarloResult:
+    """Run ``n_runs`` seeded missions in each of ``modes``; see the module docstring.
+
+    ``yaw_bias_deg`` / ``yaw_bias_walk_deg_per_sqrt_s``: AHRS yaw bias of the missions (constant, random walk);
+    ``config_overrides``: SlamConfig fields (e.g. ``{"surveyed_objects": ["reducing_socket_0"]}``).
+    Summary per mode: ATE (mean, median, max), DR/mode ATE ratio, final error, mean 3-sigma at 1/3, 2/3 and
+    the end of the mission, position ANEES with its band and the fraction of epochs in it, and the landmark
+    ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
+    """
     n_runs = check_int("n_runs", n_runs, caller="run_montecarlo", minimum=1)
     modes = tuple(modes)
     for mode in modes:
@@ -81,7 +105,9 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     met: dict = {m: [] for m in modes}
     stamps = None
     for i in range(n_runs):
-        mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops)
+        mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
+                               yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
+                               white_dvl=white_dvl)
         cfg = SlamConfig.for_mission(mission, **(config_overrides or {}))
         for mode in modes:
             res = run_slam(mission, mode=mode, config=cfg, seed=seed + i)
@@ -114,9 +140,29 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
             "anees_mean": a["anees_mean"], "band": list(chi2_band(3, n_runs)), "fraction_in_band": a["fraction_in_band"],
             "n_landmarks_mean": float(np.mean([m["n_landmarks"] for m in met[mode]])),
             "cross_class_updates": int(sum(m["cross_class_updates"] for m in met[mode])),
+            "sigma3_at_thirds_mean_m": [float(S3[:, min(K - 1, int(round(f * (K - 1))))].mean()) for f in (1 / 3, 2 / 3, 1.0)],
+            "landmark_nees_position": _landmark_anees([m.get("landmark_nees_position", []) for m in met[mode]], 3),
+            "landmark_nees_pose": _landmark_anees([m.get("landmark_nees_pose", []) for m in met[mode]], 6),
+            "dvl_rejected_mean": float(np.mean([m.get("dvl_rejected", 0) for m in met[mode]])),
         }
+    if "dr" in summary:
+        for mode in modes:
+            summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(summary[mode]["ate_rmse_mean_m"], 1e-12)
     return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
                             {m: out[m][2] for m in modes}, met, summary)
+
+
+def _landmark_anees(per_run: list, dof: int) -> dict:
+    """Mean of all landmarks' final NEES over the runs, its chi-square band and the fraction of landmarks whose
+    NEES is inside the two-sided 95 % chi-square(dof) interval."""
+    v = np.array([x for run in per_run for x in run], dtype=float)
+    if len(v) == 0:
+        return {"n": 0, "anees": None, "band": None, "fraction_in_95": None}
+    from scipy.stats import chi2
+
+    lo, hi = chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)
+    return {"n": int(len(v)), "anees": float(v.mean()), "band": list(chi2_band(dof, len(v))),
+            "fraction_in_95": float(np.mean((v >= lo) & (v <= hi)))}
 
 
 def write_montecarlo(result: MonteCarloResult, out_dir: str | Path) -> Path:

@@ -40,17 +40,30 @@ _EZ = np.array([0.0, 0.0, 1.0])
 class SlamConfig:
     """Filter settings (SI units, radians). :meth:`for_mission` takes the sensor noise from the mission."""
 
-    velocity_rw_mps_per_sqrt_s: float = 0.02
+    velocity_rw_mps_per_sqrt_s: float = 0.05
     dvl_noise_abs_mps: float = 0.001
     dvl_noise_rel: float = 0.003
     dvl_max_speed_mps: float = 1.5
+    dvl_slope_noise_factor: float = 5.0
+    dvl_calibration: bool = True
+    dvl_scale_sigma: float = 0.005
+    dvl_misalignment_sigma_rad: float = math.radians(0.5)
+    dvl_bias_sigma_mps: float = 0.003
+    dvl_bias_tau_s: float = 20.0
+    dvl_slope_bias_sigma_mps: float = 0.015
+    dvl_slope_bias_tau_s: float = 5.0
+    dvl_slope_map: bool = True
     depth_sigma_m: float = 0.02
     ahrs_sigma_rpy_rad: tuple = (math.radians(0.2), math.radians(0.2), math.radians(1.0))
     propagate_attitude_noise: bool = True
     yaw_bias_sigma_rad: float = math.radians(3.0)
     yaw_bias_rw_rad_per_sqrt_s: float = 0.0
-    initial_position_sigma_m: float = 0.02
+    initial_position_sigma_m: float = 0.01
     initial_velocity_sigma_mps: float = 0.05
+    perturb_initial_position: bool = True
+    surveyed_objects: tuple = ()
+    survey_position_sigma_m: float = 0.01
+    survey_rotation_sigma_rad: float = math.radians(0.5)
     max_predict_dt_s: float = 0.1
     gate_probability: float = 0.99
     sensor_gate_probability: float = 0.9999
@@ -80,6 +93,13 @@ class SlamConfig:
                 raise ConfigError(f"The {name!r} field of SlamConfig must be > 0. Got {getattr(self, name)!r} instead.")
         if not 0.5 < self.gate_probability < 1.0 or not 0.5 < self.sensor_gate_probability < 1.0:
             raise ConfigError("The gate probabilities of SlamConfig must be in (0.5, 1).")
+        if self.dvl_bias_tau_s <= 0 or self.dvl_slope_noise_factor < 1:
+            raise ConfigError("SlamConfig needs dvl_bias_tau_s > 0 and dvl_slope_noise_factor >= 1. "
+                              f"Got {self.dvl_bias_tau_s!r} and {self.dvl_slope_noise_factor!r} instead.")
+        if isinstance(self.surveyed_objects, str) or not all(isinstance(n, str) for n in self.surveyed_objects):
+            raise ConfigError(f"The 'surveyed_objects' field of SlamConfig must be a sequence of object names. "
+                              f"Got {self.surveyed_objects!r} instead.")
+        object.__setattr__(self, "surveyed_objects", tuple(self.surveyed_objects))
         if len(self.ahrs_sigma_rpy_rad) != 3:
             raise ConfigError(f"The 'ahrs_sigma_rpy_rad' field of SlamConfig must be 3 numbers. Got {self.ahrs_sigma_rpy_rad!r} instead.")
         object.__setattr__(self, "ahrs_sigma_rpy_rad", tuple(float(x) for x in self.ahrs_sigma_rpy_rad))
@@ -88,6 +108,7 @@ class SlamConfig:
         d = asdict(self)
         d["detections"] = self.detections.to_dict()
         d["ahrs_sigma_rpy_rad"] = list(self.ahrs_sigma_rpy_rad)
+        d["surveyed_objects"] = list(self.surveyed_objects)
         return d
 
     @classmethod
@@ -103,15 +124,27 @@ class SlamConfig:
 
     @classmethod
     def for_mission(cls, mission: Mission, **overrides) -> "SlamConfig":
-        """Defaults with the sensor noise and scanner field of view read from ``mission.config``
-        (the simulator's ``SimulatorConfig.to_dict()``) when present."""
+        """Defaults with the sensor noise levels and the scanner field of view read from ``mission.config``
+        (``mission.json``'s ``simulator`` section, i.e. ``SimulatorConfig.to_dict()``, or the same sections at
+        the top level) when present. Only what a navigator knows from the sensor specifications is read: noise
+        levels and the standard deviations of the calibration errors, never the per-mission draws."""
         c = mission.config or {}
+        c = c.get("simulator", c) or {}
         kw: dict = {}
         dvl, ahrs, depth, sc = (c.get(k, {}) or {} for k in ("dvl", "ahrs", "depth", "scanner"))
-        if "noise_abs_mps" in dvl:
-            kw["dvl_noise_abs_mps"] = float(dvl["noise_abs_mps"])
-        if "noise_rel" in dvl:
-            kw["dvl_noise_rel"] = float(dvl["noise_rel"])
+        for src, dst in (("noise_abs_mps", "dvl_noise_abs_mps"), ("noise_rel", "dvl_noise_rel"),
+                         ("slope_noise_factor", "dvl_slope_noise_factor"), ("scale_factor_sigma", "dvl_scale_sigma"),
+                         ("misalignment_sigma_rad", "dvl_misalignment_sigma_rad"),
+                         ("bias_sigma_mps", "dvl_bias_sigma_mps"), ("bias_tau_s", "dvl_bias_tau_s"),
+                         ("slope_bias_sigma_mps", "dvl_slope_bias_sigma_mps"),
+                         ("slope_bias_tau_s", "dvl_slope_bias_tau_s")):
+            if src in dvl:
+                kw[dst] = max(float(dvl[src]), 1.0) if dst == "dvl_slope_noise_factor" else float(dvl[src])
+        if dvl and not any(float(dvl.get(k, 0.0)) > 0 for k in ("scale_factor_sigma", "misalignment_sigma_rad",
+                                                                 "bias_sigma_mps", "slope_bias_sigma_mps")):
+            kw["dvl_calibration"] = False
+        if "yaw_bias_walk_rad_per_sqrt_s" in ahrs:
+            kw["yaw_bias_rw_rad_per_sqrt_s"] = float(ahrs["yaw_bias_walk_rad_per_sqrt_s"])
         if "noise_rpy_rad" in ahrs:
             kw["ahrs_sigma_rpy_rad"] = tuple(float(x) for x in ahrs["noise_rpy_rad"])
         if "noise_m" in depth:
@@ -144,6 +177,8 @@ class LandmarkEstimate:
     matched_object: str = ""
     position_error_m: float = float("nan")
     orientation_error_rad: float = float("nan")
+    nees_position: float = float("nan")  #: 3 dof, against the matched object's true position
+    nees_pose: float = float("nan")  #: 6 dof (modulo a discrete symmetry); NaN for a continuous symmetry
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,6 +197,7 @@ class SlamResult:
     update_log: list[dict]
     metrics: dict
     config: SlamConfig
+    dvl_calibration: np.ndarray | None = None  #: (K, 8) [b (3), slope b (3) (m/s), k, delta (rad)] if estimated
 
     @property
     def position_error_m(self) -> np.ndarray | None:
@@ -205,14 +241,45 @@ def run_slam(mission: Mission, detections_by_scan: dict[int, list[Detection]] | 
     cfg = config or SlamConfig.for_mission(mission)
     rng = as_rng(seed, caller="run_slam")
     symmetries = builtin_symmetries() if symmetries is None else symmetries
+    # initial-state and survey errors: their own stream (spawning draws nothing), the same in every mode
+    init_rng = rng.spawn(1)[0] if isinstance(seed, np.random.Generator) else \
+        np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
     if detections_by_scan is None and mode != "dr":
         detections_by_scan = simulate_detections(mission, cfg.detections, seed=rng, symmetries=symmetries)
-    return _Runner(mission, cfg, mode, symmetries).run(detections_by_scan or {})
+    return _Runner(mission, cfg, mode, symmetries, init_rng).run(detections_by_scan or {})
+
+
+def _slope_test(world: dict, beam_angle_rad: float):
+    """``f(position, R_world_vehicle) -> bool``: does a Janus beam (azimuths 45 + k 90 deg, ``beam_angle_rad`` off the body z)
+    reach the tank floor outside its flat rectangle? The same geometry as the simulator's
+    ``dvl_beams_over_slope`` (flat-floor approximation), for one pose, without array overhead."""
+    from ..simulation.config import WorldConfig
+
+    w = WorldConfig.from_dict(world)
+    hx, hy = w.tank_length_m / 2 - w.slope_run_m, w.tank_width_m / 2 - w.slope_run_m
+    sb, cb = math.sin(beam_angle_rad), math.cos(beam_angle_rad)
+    beams = [(sb * math.cos(math.radians(a)), sb * math.sin(math.radians(a)), cb) for a in (45.0, 135.0, 225.0, 315.0)]
+
+    def over(p: np.ndarray, R_world_vehicle: np.ndarray) -> bool:  # 4 beams, plain floats: ~10 us
+        px, py, pz = float(p[0]), float(p[1]), float(p[2])
+        if abs(px) > hx or abs(py) > hy:
+            return True
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_world_vehicle.tolist()
+        for bx, by, bz in beams:
+            dz = max(r20 * bx + r21 * by + r22 * bz, 1e-3)
+            reach = (w.tank_depth_m - pz) / dz
+            if abs(px + (r00 * bx + r01 * by + r02 * bz) * reach) > hx or abs(py + (r10 * bx + r11 * by + r12 * bz) * reach) > hy:
+                return True
+        return False
+
+    return over
 
 
 class _Runner:
-    def __init__(self, mission: Mission, cfg: SlamConfig, mode: str, symmetries: dict[str, Symmetry]) -> None:
+    def __init__(self, mission: Mission, cfg: SlamConfig, mode: str, symmetries: dict[str, Symmetry],
+                 init_rng: np.random.Generator) -> None:
         self.m, self.cfg, self.mode, self.sym = mission, cfg, mode, symmetries
+        self.init_rng = init_rng
         self.gate = GateThresholds(cfg.gate_probability)
         a = mission.ahrs
         if len(a.stamp_s) == 0:
@@ -227,6 +294,10 @@ class _Runner:
         self._thr = {d: self.gate.threshold(d) for d in range(1, 7)}
         self._rejections: dict[str, int] = {}
         self._sensor_thr = {d: GateThresholds(cfg.sensor_gate_probability).threshold(d) for d in (1, 3)}
+        self._over_slope = None  # (position, rpy) -> bool: a DVL beam on the tank's slopes (known tank map)
+        sim = (mission.config or {}).get("simulator", {}) or {}
+        if cfg.dvl_slope_map and isinstance(sim.get("world"), dict):
+            self._over_slope = _slope_test(sim["world"], (sim.get("dvl") or {}).get("beam_angle_rad", math.radians(30.0)))
 
     # ------------------------------------------------------------------ helpers
     def attitude(self, t: float) -> np.ndarray:
@@ -243,8 +314,11 @@ class _Runner:
         while self.t < t - 1e-12:
             dt = min(cfg.max_predict_dt_s, t - self.t)
             rpy = self.attitude(self.t + dt / 2)
-            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.velocity_rw_mps_per_sqrt_s,
-                        attitude_cov_world=self.attitude_cov_world(rpy), yaw_bias_rw=cfg.yaw_bias_rw_rad_per_sqrt_s)
+            R = rotation_from_rpy(*rpy)
+            slope = self._over_slope is not None and ekf.dvl_calibration and self._over_slope(ekf.xa[0:3], R)
+            ekf.predict(dt, R, velocity_rw=cfg.velocity_rw_mps_per_sqrt_s,
+                        attitude_cov_world=self.attitude_cov_world(rpy), yaw_bias_rw=cfg.yaw_bias_rw_rad_per_sqrt_s,
+                        dvl_on_slope=bool(slope))
             self.t += dt
 
     def _log(self, **kw) -> None:
@@ -259,20 +333,34 @@ class _Runner:
         t0 = float(max(min(starts), self._att_t[0]))
         ends = [s[-1] for s in (m.ahrs.stamp_s, m.dvl.stamp_s, m.depth.stamp_s) if len(s)]
         t_end = float(max(ends))
+        # the start: a known launch point (truth + an N(0, initial_position_sigma) fix error, drawn so that the
+        # initial NEES is chi-square like every later one), zero velocity unless the DVL says otherwise
         p0 = m.truth.interpolate_position(t0)[0] if m.truth is not None else np.zeros(3)
+        dp0 = self.init_rng.normal(0.0, cfg.initial_position_sigma_m, 3)
+        if m.truth is not None and cfg.perturb_initial_position:
+            p0 = p0 + dp0
         v0 = np.zeros(3)
         valid = np.flatnonzero(m.dvl.valid)
         if len(valid):
             v0 = m.dvl.velocity_body_mps[valid[0]]
         heading = self.mode == "pose+heading"
-        nv = 7 if heading else 6
-        P0 = np.zeros((nv, nv))
-        P0[0:3, 0:3] = np.eye(3) * cfg.initial_position_sigma_m**2
-        P0[3:6, 3:6] = np.eye(3) * cfg.initial_velocity_sigma_mps**2
+        calib = cfg.dvl_calibration
+        ekf = SemanticEkf(p0, v0, np.eye(6 + 8 * calib + heading), yaw_bias=heading, dvl_calibration=calib,
+                          dvl_bias_sigma_mps=cfg.dvl_bias_sigma_mps, dvl_bias_tau_s=cfg.dvl_bias_tau_s,
+                          dvl_slope_bias_sigma_mps=cfg.dvl_slope_bias_sigma_mps,
+                          dvl_slope_bias_tau_s=cfg.dvl_slope_bias_tau_s)
+        var0 = [cfg.initial_position_sigma_m**2] * 3 + [cfg.initial_velocity_sigma_mps**2] * 3
+        if calib:
+            var0 += [max(cfg.dvl_bias_sigma_mps, 1e-6)**2] * 3 + [1e-12] * 3 + [max(cfg.dvl_scale_sigma, 1e-6)**2,
+                                                                   max(cfg.dvl_misalignment_sigma_rad, 1e-6)**2]
         if heading:
-            P0[6, 6] = cfg.yaw_bias_sigma_rad**2
-        self.ekf = SemanticEkf(p0, v0, P0, yaw_bias=heading)
+            var0 += [cfg.yaw_bias_sigma_rad**2]
+        ekf.P[...] = np.diag(var0)
+        ekf._set_active(np.arange(ekf.n_v))
+        self.ekf = ekf
         self.t = t0
+        if cfg.surveyed_objects:
+            self._add_surveyed(t0)
 
         # events: (stamp, order, kind, index)
         ev = []
@@ -285,7 +373,7 @@ class _Runner:
         hist_t = np.arange(t0, t_end + 1e-9, 1.0 / cfg.history_rate_hz)
         ev += [(float(t), 4, "hist", i) for i, t in enumerate(hist_t)]
         ev.sort(key=lambda e: (e[0], e[1]))
-        H = {"t": [], "p": [], "Pp": [], "v": [], "Pv": [], "b": []}
+        H = {"t": [], "p": [], "Pp": [], "v": [], "Pv": [], "b": [], "c": []}
         for t, _, kind, i in ev:
             self.predict_to(t)
             if kind == "dvl":
@@ -302,7 +390,34 @@ class _Runner:
                 H["v"].append(ekf.xa[3:6].copy())
                 H["Pv"].append(ekf.Paa[3:6, 3:6].copy())
                 H["b"].append(ekf.yaw_bias_rad())
+                H["c"].append(ekf.dvl_calibration_state())
         return self._result(H)
+
+    def _add_surveyed(self, t0: float) -> None:
+        """Landmarks of surveyed objects (a known reference structure): the object's true pose plus an
+        N(0, survey sigma) error, independent of the vehicle. They make the absolute heading observable."""
+        cfg, m = self.cfg, self.m
+        byname = {o.name: o for o in m.objects}
+        missing = [n for n in cfg.surveyed_objects if n not in byname]
+        if missing:
+            raise SlamError(f"The 'surveyed_objects' of SlamConfig must name objects of the mission "
+                            f"({sorted(byname)}). Got {missing} instead.")
+        poses, covs, labels = [], [], []
+        for name in cfg.surveyed_objects:
+            o = byname[name]
+            R = kern.so3_exp(self.init_rng.normal(0.0, cfg.survey_rotation_sigma_rad, 3)) @ o.T_world_object.rotation
+            p = o.T_world_object.translation_m + self.init_rng.normal(0.0, cfg.survey_position_sigma_m, 3)
+            rpy = rpy_from_rotation(R)
+            Einv = kern.world_rate_to_rpy(rpy)
+            C = np.zeros((6, 6))
+            C[0:3, 0:3] = np.eye(3) * cfg.survey_position_sigma_m**2
+            C[3:6, 3:6] = Einv @ Einv.T * cfg.survey_rotation_sigma_rad**2
+            poses.append(np.concatenate([p, rpy]))
+            covs.append(0.5 * (C + C.T))
+            labels.append(o.label)
+        self.ekf.add_prior_landmarks(np.array(poses), np.array(covs), labels, stamp_s=t0,
+                                     names=list(cfg.surveyed_objects))
+        self.n_surveyed = len(poses)
 
     # ------------------------------------------------------------------ sensor updates
     def _linear_update(self, t, kind, idx, Hc, z, Rn, dof) -> None:
@@ -334,7 +449,45 @@ class _Runner:
             self._log(stamp_s=t, kind="dvl", nis=float("nan"), dof=3, accepted=False, reason="max_speed")
             return
         sigma = cfg.dvl_noise_abs_mps + cfg.dvl_noise_rel * speed
-        self._linear_update(t, "dvl", np.arange(3, 6), np.eye(3), z, np.eye(3) * sigma**2, 3)
+        ekf = self.ekf
+        if ekf.dvl_calibration:  # z = (1 + k) Rz(delta) v + b
+            idx = np.arange(3, 3 + 11)
+            x = ekf.mean(idx)
+            v, b, k, dl = x[0:3], x[3:6] + x[6:9], x[9], x[10]
+            c, s_ = np.cos(dl), np.sin(dl)
+            Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            dRz = np.array([[-s_, -c, 0.0], [c, -s_, 0.0], [0.0, 0.0, 0.0]])
+            Hc = np.column_stack([(1.0 + k) * Rz, np.eye(3), np.eye(3), Rz @ v, (1.0 + k) * dRz @ v])
+            nu = z - ((1.0 + k) * Rz @ v + b)
+        else:
+            idx, Hc = np.arange(3, 6), np.eye(3)
+            nu = z - ekf.mean(idx)
+        thr = self._sensor_thr[3]
+        # two hypotheses, as the sensor is specified: nominal noise, or degraded (beams on a slope: noise x factor);
+        # neither: an outlier, rejected. Several rejections in a row mean the *prediction* is wrong (an
+        # unmodelled acceleration): inflate the velocity covariance by the innovation, then update (no lock-out)
+        reason = ""
+        hyps = (1.0, cfg.dvl_slope_noise_factor**2)
+        if self._over_slope is not None:  # the navigator knows the tank: one hypothesis, from its own position
+            hyps = hyps[1:] if self._over_slope(ekf.xa[0:3], rotation_from_rpy(*self.attitude(t))) else hyps[:1]
+        for f2 in hyps:
+            Rn = np.eye(3) * sigma**2 * f2
+            d2 = kern.mahalanobis2(nu, ekf.innovation_cov(idx, Hc, Rn))
+            if d2 <= thr:
+                reason = "nominal" if f2 == 1.0 else "degraded"
+                break
+        n_rej = self._rejections.get("dvl", 0)
+        if not reason and n_rej >= cfg.sensor_gate_max_rejections:
+            ekf.Paa[3:6, 3:6] += np.diag(nu**2)
+            Rn = np.eye(3) * sigma**2
+            reason = "maneuver"
+        if reason:
+            ekf.update(idx, Hc, nu, Rn)
+            self._rejections["dvl"] = 0
+        else:
+            self._rejections["dvl"] = n_rej + 1
+        self._log(stamp_s=t, kind="dvl", nis=d2, dof=3, threshold=thr, accepted=bool(reason),
+                  reason=reason or "outlier")
 
     def update_depth(self, t: float, i: int) -> None:
         self._linear_update(t, "depth", np.array([2]), np.ones((1, 1)), np.array([self.m.depth.depth_m[i]]),
@@ -470,8 +623,8 @@ class _Runner:
         G = np.zeros((6, ekf.n_v))
         G[0:3, 0:3] = np.eye(3)
         if ekf.yaw_bias:
-            G[0:3, 6] = -kern.skew(_EZ) @ (pos - ekf.xa[0:3])
-            G[5, 6] = -1.0
+            G[0:3, ekf.i_yaw] = -kern.skew(_EZ) @ (pos - ekf.xa[0:3])
+            G[5, ekf.i_yaw] = -1.0
         names = [o.payload[4] for o in members]
         name = max(set(names), key=names.count) if names else ""
         j = ekf.add_landmark(np.concatenate([pos, rpy]), G, noise, label=members[0].label, stamp_s=t, name=name)
@@ -509,6 +662,12 @@ class _Runner:
         metrics["wrong_object_updates"] = sum(bool(r.get("object_name")) and r["object_name"] != byname.get(r["landmark"])
                                               for r in ups)
         metrics["dvl_rejected"] = sum(r["kind"] == "dvl" and not r["accepted"] for r in self.log)
+        metrics["dvl_degraded"] = sum(r["kind"] == "dvl" and r.get("reason") == "degraded" for r in self.log)
+        metrics["dvl_maneuver_resets"] = sum(r["kind"] == "dvl" and r.get("reason") == "maneuver" for r in self.log)
+        lp = np.array([lm.nees_position for lm in landmarks])
+        lq = np.array([lm.nees_pose for lm in landmarks])
+        metrics["landmark_nees_position"] = lp[np.isfinite(lp)].tolist()
+        metrics["landmark_nees_pose"] = lq[np.isfinite(lq)].tolist()
         metrics["dvl_dropouts"] = sum(r["kind"] == "dvl_dropout" for r in self.log)
         if landmarks and m.objects:
             pe = np.array([lm.position_error_m for lm in landmarks])
@@ -519,7 +678,7 @@ class _Runner:
             metrics["n_objects_mapped"] = len({lm.matched_object for lm in landmarks if lm.matched_object})
         return SlamResult(self.mode, stamps, pos, Pp, np.asarray(H["v"]).reshape(-1, 3),
                           np.asarray(H["Pv"]).reshape(-1, 3, 3), np.asarray(H["b"]), truth, landmarks, self.log,
-                          metrics, self.cfg)
+                          metrics, self.cfg, np.asarray(H["c"]).reshape(-1, 8) if ekf.dvl_calibration else None)
 
     def _evaluate_landmark(self, j, lm, pose, cov) -> LandmarkEstimate:
         objs = [o for o in self.m.objects if o.label == lm.label]
@@ -537,8 +696,17 @@ class _Runner:
             from .association import align_rotation
 
             err = float(np.linalg.norm(kern.so3_log(align_rotation(R_est, R_true, sym, np.zeros((0, 3))) @ R_true.T)))
+        e_p = o.T_world_object.translation_m - pose[:3]
+        nees_p = kern.mahalanobis2(e_p, cov[:3, :3])
+        nees_q = float("nan")
+        if sym.kind != "continuous":
+            from .association import align_rotation
+
+            R_al = align_rotation(R_true, R_est, sym, np.zeros((0, 3)))  # the equivalent truth closest to the estimate
+            e = np.concatenate([e_p, kern.world_rate_to_rpy(pose[3:6]) @ kern.so3_log(R_al @ R_est.T)])
+            nees_q = kern.mahalanobis2(e, cov)
         return LandmarkEstimate(j, lm.label, pose, cov, lm.first_seen_s, lm.last_seen_s, lm.n_updates, o.name,
-                                float(min(d)), err)
+                                float(min(d)), err, nees_p, nees_q)
 
 
 # ---------------------------------------------------------------------- writing a run directory
