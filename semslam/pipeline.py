@@ -20,17 +20,30 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float_array, as_rng, check_choice
+from ._validation import as_float_array, as_rng, check_choice, check_positive
 from .cloud import PointCloud
 from .detection import Detection
 from .errors import InputError, RecognitionError
-from .recognition import UNKNOWN_LABEL, Recognizer, SvmClassifier, ViewDatabase, chi2_distances, combine_descriptors
+from .recognition import (
+    UNKNOWN_LABEL,
+    Recognizer,
+    SvmClassifier,
+    ViewDatabase,
+    chi2_distances,
+    combine_descriptors,
+)
+from .recognition.plausibility import (
+    cluster_extent_m,
+    scan_angular_extent,
+    touches_scan_border,
+)
 from .registration.pose import PoseConfig, PoseModel, estimate_object_pose, prepare_pose_model
 from .segmentation.scene import SegmentationConfig, SegmentationResult, segment_scene
 
 __all__ = ["ClusterOutcome", "PipelineConfig", "RecognitionResult", "ScanRecognizer", "recognize_scan"]
 
 CLASSIFIERS = ("chi2", "svm")
+BORDER_POLICIES = ("reject", "flag", "keep")
 POSE_MODELS = ("fused", "view")
 
 
@@ -43,13 +56,33 @@ class PipelineConfig:
     segmentation : SegmentationConfig
         Voxel grid, plane removal and clustering (see :class:`~semslam.segmentation.scene.SegmentationConfig`).
     descriptor : {"esf", "vfh", "esf+vfh"}
-        Global descriptor used for matching (ESF by default: the papers' best, and it needs no normals).
+        Global descriptor used for matching. Default ``"esf+vfh"``: on simulated laser missions (built-in
+        database, ``benchmarks/recognition.py``) it separates the fittings from clutter best (precision
+        97.7 %, recall 97 % of un-cut object clusters, against 98.4 % / 95.5 % for ESF alone with margin 8).
     classifier : {"chi2", "svm"}
         Chi-square nearest view (the papers' matcher) or the RBF SVM; unknown rejection always uses the
         chi-square distance to the nearest view, calibrated on the database.
     rejection : {"global", "per_class", "none"}
     reject_quantile, reject_margin : float
-        Calibration of the rejection threshold (see :mod:`semslam.recognition.rejection`).
+        Calibration of the rejection threshold (see :mod:`semslam.recognition.rejection`): threshold =
+        ``reject_margin * quantile(LOO distances between database views, reject_quantile)``. The database
+        views come from another sensor (a Kinect) than the queries (laser clusters after a 5 mm grid,
+        noisier, seen from other angles), so laser clusters of known objects lie several times farther
+        from their nearest view than views from each other: the default margin 6 keeps 97 % of them,
+        while clutter is mostly rejected by the size test below.
+    size_tolerance : float or None
+        Size plausibility: a cluster whose largest principal extent exceeds ``size_tolerance`` times the
+        matched class's largest bounding-box dimension plus ``size_slack_m`` is rejected (floor and slope
+        remains, rocks bigger than any fitting). Default 1.15; None disables the test.
+    size_slack_m : float
+        Default 0.01 m (two voxels: noise and floor points left around the object).
+    border : {"reject", "flag", "keep"}
+        Clusters within ``border_margin_rad`` of the scan footprint's edge are cut objects (their
+        descriptor is unreliable: 85 % correct against 100 % for whole ones): ``"reject"`` (default) lists
+        them as unknown, ``"flag"`` recognises them and sets ``extras["touches_border"]`` (pose marked
+        unreliable), ``"keep"`` ignores the test. The next scans see these objects whole.
+    border_margin_rad : float
+        Default 0.5 degree (~3 laser lines of the default scanner).
     pose_model : {"fused", "view"}
         Align to all views of the class fused in its canonical frame (default), or to the matched view only
         (the papers).
@@ -60,11 +93,15 @@ class PipelineConfig:
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
-    descriptor: str = "esf"
+    descriptor: str = "esf+vfh"
     classifier: str = "chi2"
     rejection: str = "global"
     reject_quantile: float = 0.95
-    reject_margin: float = 1.0
+    reject_margin: float = 6.0
+    size_tolerance: float | None = 1.15
+    size_slack_m: float = 0.01
+    border: str = "reject"
+    border_margin_rad: float = float(np.radians(0.5))
     pose_model: str = "fused"
     pose: PoseConfig = field(default_factory=PoseConfig)
     estimate_pose: bool = True
@@ -75,6 +112,12 @@ class PipelineConfig:
         check_choice("classifier", self.classifier, CLASSIFIERS, caller=c)
         check_choice("rejection", self.rejection, ("global", "per_class", "none"), caller=c)
         check_choice("pose_model", self.pose_model, POSE_MODELS, caller=c)
+        check_choice("border", self.border, BORDER_POLICIES, caller=c)
+        check_positive("reject_margin", self.reject_margin, caller=c)
+        if self.size_tolerance is not None:
+            check_positive("size_tolerance", self.size_tolerance, caller=c)
+        check_positive("size_slack_m", self.size_slack_m, caller=c, allow_zero=True)
+        check_positive("border_margin_rad", self.border_margin_rad, caller=c, allow_zero=True)
         if not isinstance(self.segmentation, SegmentationConfig):
             raise InputError(f"The 'segmentation' argument of {c} must be a SegmentationConfig. "
                              f"Got {type(self.segmentation).__name__} instead.")
@@ -90,7 +133,12 @@ class PipelineConfig:
 
 @dataclass(frozen=True, eq=False)
 class ClusterOutcome:
-    """What happened to one cluster: its size, the match, and the detection or why there is none."""
+    """What happened to one cluster: its size, the match, and the detection or why there is none.
+
+    ``distance`` is NaN and ``nearest_label`` empty when the cluster was rejected before matching (too
+    big for every class, or cut by the scan border); ``extent_m`` (3,) holds its principal extents,
+    largest first (metres).
+    """
 
     cluster_index: int
     n_points: int
@@ -100,11 +148,14 @@ class ClusterOutcome:
     threshold: float
     detection: Detection | None
     reason: str
+    touches_border: bool = False
+    extent_m: tuple = (0.0, 0.0, 0.0)
 
     def to_dict(self) -> dict:
         return {"cluster_index": self.cluster_index, "n_points": self.n_points, "label": self.label,
                 "nearest_label": self.nearest_label, "distance": self.distance, "threshold": self.threshold,
-                "detected": self.detection is not None, "reason": self.reason}
+                "detected": self.detection is not None, "reason": self.reason,
+                "touches_border": self.touches_border, "extent_m": [float(e) for e in self.extent_m]}
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +229,14 @@ class ScanRecognizer:
                 self._pose_models[key] = prepare_pose_model(self.db.view_cloud(key), self.config.pose)
         return self._pose_models[key]
 
+    def _max_plausible_extent_m(self) -> float:
+        """Largest cluster extent any class may have (size test off: infinity)."""
+        cfg = self.config
+        if cfg.size_tolerance is None:
+            return float("inf")
+        biggest = max(float(self.db.class_info(c).size_xyz_m.max()) for c in self.db.classes)
+        return cfg.size_tolerance * biggest + cfg.size_slack_m
+
     def warm_up(self) -> None:
         """Prepare every class's pose model now (so that the first scan is not slower than the others)."""
         for label in self.db.classes:
@@ -224,8 +283,23 @@ class ScanRecognizer:
                    "pose": 0.0}
         outcomes: list[ClusterOutcome] = []
         detections: list[Detection] = []
+        scan_extent = scan_angular_extent(scan.points_xyz_m, scan.viewpoint_xyz_m) if cfg.border != "keep" else None
+        max_plausible = self._max_plausible_extent_m()
         for k, cluster in enumerate(seg.clusters):
             cluster_seed = int(seeds[1]) + k
+            extent = cluster_extent_m(cluster.points_xyz_m)
+            border = scan_extent is not None and touches_scan_border(
+                cluster.points_xyz_m, scan_extent, scan.viewpoint_xyz_m, margin_rad=cfg.border_margin_rad)
+            common = {"touches_border": bool(border), "extent_m": tuple(float(e) for e in extent)}
+            if extent[0] > max_plausible:
+                outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, "", float("nan"), float("nan"), None,
+                                               f"rejected: extent {extent[0]:.3f} m > {max_plausible:.3f} m, too big "
+                                               f"for any class", **common))
+                continue
+            if border and cfg.border == "reject":
+                outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, "", float("nan"), float("nan"), None,
+                                               "rejected: touches the scan border (partial object)", **common))
+                continue
             t0 = time.perf_counter()
             desc = self.db.describe(cluster, seed=cluster_seed)
             t1 = time.perf_counter()
@@ -241,23 +315,38 @@ class ScanRecognizer:
             if label == UNKNOWN_LABEL:
                 outcomes.append(ClusterOutcome(k, cluster.n_points, label, match.nearest_label, match.distance,
                                                match.threshold, None,
-                                               f"rejected: distance {match.distance:.4g} > threshold {match.threshold:.4g}"))
+                                               f"rejected: distance {match.distance:.4g} > threshold {match.threshold:.4g}",
+                                               **common))
                 continue
+            if cfg.size_tolerance is not None:
+                size = self.db.class_info(label).size_xyz_m
+                limit = cfg.size_tolerance * float(size.max()) + cfg.size_slack_m
+                if extent[0] > limit:
+                    outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, match.nearest_label,
+                                                   match.distance, match.threshold, None,
+                                                   f"rejected: extent {extent[0]:.3f} m > {limit:.3f} m, too big for "
+                                                   f"{label}", **common))
+                    continue
             raw_idx = seg.input_indices(k)
             det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
-            det = self._detect(scan, raw_idx, cluster, label, view_index, match, det_stamp, scan_id, cluster_seed, timings)
+            det = self._detect(scan, raw_idx, cluster, label, view_index, match, det_stamp, scan_id, cluster_seed,
+                               timings, border)
             detections.append(det)
+            reason = "detected" if det.reliable else "detected (unreliable pose)"
+            if border:
+                reason += ", touches the scan border"
             outcomes.append(ClusterOutcome(k, cluster.n_points, label, match.nearest_label, match.distance,
-                                           match.threshold, det, "detected" if det.reliable else "detected (unreliable pose)"))
+                                           match.threshold, det, reason, **common))
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return RecognitionResult(detections, outcomes, seg, timings)
 
     def _detect(self, scan: PointCloud, raw_idx: np.ndarray, cluster: PointCloud, label: str, view_index: int,
-                match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict) -> Detection:
+                match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict,
+                touches_border: bool = False) -> Detection:
         from .geometry import RigidTransform
 
         extras = {"view_index": int(view_index), "view_id": str(self.db.view_ids[view_index]),
-                  "cluster_points": int(len(raw_idx))}
+                  "cluster_points": len(raw_idx), "touches_border": bool(touches_border)}
         if not self.config.estimate_pose:
             centroid = cluster.points_xyz_m.mean(axis=0)
             return Detection(label, match.distance, RigidTransform.from_rotation_translation(np.eye(3), centroid),
@@ -271,7 +360,8 @@ class ScanRecognizer:
                                     viewpoint_xyz_m=scan.viewpoint_xyz_m)
         timings["pose"] += (time.perf_counter() - t0) * 1e3
         return Detection(label, match.distance, pose.T_scanner_object, pose.covariance_6x6, score_kind="chi2",
-                         fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=int(len(points)), reliable=pose.reliable,
+                         fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=len(points),
+                         reliable=bool(pose.reliable and not touches_border),
                          stamp_s=stamp_s, scan_id=scan_id, extras=extras)
 
 

@@ -35,7 +35,22 @@ def standin(monkeypatch):
 @pytest.fixture
 def small_db(standin):
     views, classes = synthetic_shape_views(4, n_points=150, seed=1)
-    return build_database(views, classes, seed=3), views, classes
+    return build_database(views, classes, seed=3, voxel_leaf_m=None), views, classes
+
+
+def test_voxel_leaf_applies_to_views_and_queries(standin):
+    from semslam.segmentation import voxel_downsample
+
+    views, classes = synthetic_shape_views(2, n_points=400, seed=1)
+    db = build_database(views, classes, seed=3, voxel_leaf_m=0.01)
+    assert db.params["voxel_leaf_m"] == 0.01
+    expected = [len(voxel_downsample(c.points_xyz_m, 0.01)) - 1 for _, _, c in views]  # minus the NaN normal
+    assert standin.vfh_inputs == expected and max(expected) < 399
+    standin.vfh_inputs.clear()
+    db.describe(views[0][2], seed=0)  # the query goes through the same grid
+    assert standin.vfh_inputs == expected[:1]
+    with pytest.raises(InputError, match="voxel_leaf_m"):
+        build_database(views, classes, voxel_leaf_m=-1.0)
 
 
 def test_build_database_contents(small_db, standin):
@@ -241,8 +256,9 @@ def test_build_with_real_descriptors(tmp_path):
     np.testing.assert_allclose(db.esf.sum(axis=1), 1.0, atol=1e-4)  # ESF sums to 1
     assert (db.vfh[:, 135:180] == 0).all()  # PCL's default VFH has no size component
     np.testing.assert_allclose(db.vfh[:, 180:].sum(axis=1), 100.0, rtol=1e-4)  # viewpoint part: 100 / N each
-    d = compute_view_descriptors(views[3][2], normal_radius_m=0.015, esf_n_samples=5000, seed=0)
+    d = compute_view_descriptors(views[3][2], normal_radius_m=0.015, esf_n_samples=5000, voxel_leaf_m=0.005, seed=0)
     np.testing.assert_array_equal(d.vfh, db.vfh[3])  # VFH is deterministic: recomputed identically
+    np.testing.assert_array_equal(db.describe(views[3][2]).vfh, db.vfh[3])  # describe uses the db's grid
     res = leave_one_out(db, descriptor="esf", classifier="chi2")
     assert res.accuracy == 1.0
     loaded = load_database(save_database(db, tmp_path / "real.npz"))

@@ -74,7 +74,13 @@ def test_db_build_builtin(tmp_path, capsys):
     assert db.class_info("reducing_socket").symmetry.kind == "continuous"
     assert db.class_info("reducing_tee").symmetry.order == 2
     assert np.isfinite(db.vfh).all() and (db.vfh[:, 180:].sum(axis=1) > 99).all()
-    # views are stored in the object frame: every point lies within the object's bounding box
+    # views are stored in the object frame: the points lie within the object's bounding box, up to the
+    # depth noise of the survey-geometry Kinect (sigma ~3.4 mm at 1.5 m)
+    assert db.params["voxel_leaf_m"] == 0.005
     for i in range(db.n_views):
         half = db.class_info(db.labels[i]).size_xyz_m / 2
-        assert (np.abs(db.view_points(i)) <= half + 0.01).all()
+        excess = np.max(np.abs(db.view_points(i)) - half, axis=1)
+        assert np.quantile(excess, 0.99) <= 0.01 and excess.max() <= 0.025
+        # seen from 75 degrees of elevation, 1.5 m away (the survey geometry)
+        vp = db.viewpoints_xyz_m[i]
+        assert 1.4 < np.linalg.norm(vp) < 1.6

@@ -3,7 +3,7 @@
 * ``semslam db build VIEWS_DIR --out DB.npz``: from a folder ``CLASS/VIEW.{pcd,ply,npy}`` of partial
   views in each object's canonical frame (optional ``classes.json`` for symmetry and size).
 * ``semslam db build --builtin --out DB.npz``: the four built-in fittings seen by the simulator's
-  Kinect-like camera (``--n-views`` per object).
+  Kinect-like camera (``--n-views`` per object), by default in the survey geometry (75 degrees, 1.5 m).
 * ``semslam db info DB.npz``: classes, views per class, symmetry, size, descriptor settings, file version.
 """
 
@@ -27,9 +27,17 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                      help="the four built-in objects acquired by the simulated Kinect-like camera")
     build.add_argument("--out", required=True, metavar="DB", help="database file to write (.npz)")
     build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin (default 8)")
+    build.add_argument("--kinect-elevation", type=float, default=75.0, metavar="DEG",
+                       help="camera elevation of the --builtin views, degrees (default 75: the survey geometry; "
+                            "the papers used 45)")
+    build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
+                       help="camera distance of the --builtin views, metres (default 1.5; the papers ~0.7)")
+    build.add_argument("--voxel", type=float, default=0.005, metavar="M",
+                       help="voxel grid applied to views and queries before the descriptors, metres; 0 disables "
+                            "(default 0.005, the segmentation's grid)")
     build.add_argument("--seed", type=int, default=0, help="seed of the simulated views and of ESF (default 0)")
-    build.add_argument("--normal-radius", type=float, default=0.01, metavar="M",
-                       help="normal-estimation radius for the VFH, metres (default 0.01)")
+    build.add_argument("--normal-radius", type=float, default=0.015, metavar="M",
+                       help="normal-estimation radius for the VFH, metres (default 0.015)")
     build.add_argument("--vfh-variant", default=None, help="VFH binning variant (default: the descriptors' default)")
     build.add_argument("--esf-samples", type=int, default=20000, help="ESF point-triplet samples (default 20000)")
     build.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -55,11 +63,16 @@ def run_build(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     kwargs = {"vfh_variant": args.vfh_variant, "normal_radius_m": args.normal_radius,
-              "esf_n_samples": args.esf_samples, "seed": args.seed, "progress": args.progress}
+              "esf_n_samples": args.esf_samples, "voxel_leaf_m": args.voxel if args.voxel > 0 else None,
+              "seed": args.seed, "progress": args.progress}
     if args.builtin:
-        from ..simulation import builtin_view_clouds
+        import math
 
-        views, classes = builtin_view_clouds(seed=args.seed, n_views=args.n_views)
+        from ..simulation.config import KinectConfig
+        from ..simulation.kinect import builtin_view_clouds
+
+        kinect = KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance)
+        views, classes = builtin_view_clouds(seed=args.seed, n_views=args.n_views, config=kinect)
         db = build_database(views, classes, **kwargs)
         source = "builtin"
     else:

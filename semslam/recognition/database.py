@@ -44,6 +44,10 @@ VFH_BINS = 308
 DESCRIPTORS = ("esf", "vfh", "esf+vfh")
 _ARRAYS = ("labels", "view_ids", "point_offsets", "points_xyz_m", "viewpoints_xyz_m", "esf", "vfh")
 POINT_FILE_SUFFIXES = (".pcd", ".ply", ".npy")
+#: Voxel grid applied to views and queries before their descriptors (the segmentation's default grid).
+DEFAULT_VOXEL_LEAF_M = 0.005
+#: Normal radius of the VFH: 3 voxels of the default grid (0.01 leaves edge points with too few neighbours).
+DEFAULT_NORMAL_RADIUS_M = 0.015
 
 __all__ = [
     "FORMAT_NAME",
@@ -118,7 +122,8 @@ class ViewDatabase:
     vfh : ndarray of float32, shape (V, 308)
     class_infos : dict of str to ClassInfo
     params : dict
-        How the descriptors were computed (``vfh_variant``, ``normal_radius_m``, ``esf_n_samples``, ``seed``).
+        How the descriptors were computed (``vfh_variant``, ``normal_radius_m``, ``esf_n_samples``,
+        ``voxel_leaf_m`` -- absent or None in databases built without a voxel grid --, ``seed``).
     """
 
     labels: np.ndarray
@@ -194,10 +199,16 @@ class ViewDatabase:
 
     # -- queries --------------------------------------------------------------------------------
     def describe(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> ViewDescriptors:
-        """Descriptors of a query cloud computed exactly as the stored views' (same parameters)."""
+        """Descriptors of a query cloud computed exactly as the stored views' (same parameters).
+
+        The database's voxel grid (``params["voxel_leaf_m"]``, if any) is applied to the query first, so
+        that queries and views have the same point density (a cluster already on that grid, as
+        :func:`~semslam.segmentation.segment_scene` outputs it, changes little).
+        """
         return compute_view_descriptors(
             cloud, vfh_variant=self.params.get("vfh_variant"), normal_radius_m=self.params.get("normal_radius_m", 0.01),
-            esf_n_samples=self.params.get("esf_n_samples", 20000), seed=seed)
+            esf_n_samples=self.params.get("esf_n_samples", 20000), voxel_leaf_m=self.params.get("voxel_leaf_m"),
+            seed=seed)
 
     def subset(self, indices: Any) -> ViewDatabase:
         """A database with the given views only (order kept); classes without views are dropped."""
@@ -264,10 +275,14 @@ def _vfh_default_variant() -> str:
 
 
 def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = None, normal_radius_m: float = 0.01,
-                             esf_n_samples: int = 20000, seed: int | np.random.Generator = 0) -> ViewDescriptors:
+                             esf_n_samples: int = 20000, voxel_leaf_m: float | None = None,
+                             seed: int | np.random.Generator = 0) -> ViewDescriptors:
     """ESF and VFH of one view, as stored in the database.
 
-    Normals are estimated within ``normal_radius_m`` and flipped towards ``cloud.viewpoint_xyz_m``; points
+    With ``voxel_leaf_m`` the cloud is first reduced to its voxel-grid centroids (PCL ``VoxelGrid``), so
+    that dense views (a Kinect at 0.7 m, ~1.3 mm spacing) and sparse queries (laser-scan clusters after
+    the segmentation's 5 mm grid) are described at the same density: ESF's occupancy grid and the
+    normals depend on it. Normals are estimated within ``normal_radius_m`` and flipped towards ``cloud.viewpoint_xyz_m``; points
     without a normal (fewer than 3 neighbours) are left out of the VFH. The VFH viewpoint is the cloud's.
 
     Parameters
@@ -279,6 +294,8 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
         Passed to ``compute_vfh(variant=...)``; None uses its default.
     normal_radius_m : float
     esf_n_samples : int
+    voxel_leaf_m : float, optional
+        Voxel edge (metres) of the grid applied before both descriptors; None keeps every point.
     seed : int or Generator
         Seeds ESF's random sampling.
     """
@@ -289,6 +306,14 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
                          f"Got {type(cloud).__name__} instead.")
     radius = check_positive("normal_radius_m", normal_radius_m, caller="compute_view_descriptors")
     pts = cloud.points_xyz_m
+    if voxel_leaf_m is not None:
+        from ..segmentation.voxel import voxel_downsample
+
+        leaf = check_positive("voxel_leaf_m", voxel_leaf_m, caller="compute_view_descriptors")
+        pts = voxel_downsample(pts, leaf)
+        if len(pts) < 3:
+            raise DatabaseError(f"The cloud has {len(pts)} point(s) left after the {leaf} m voxel grid: "
+                                f"ESF and VFH need at least 3. Use a smaller 'voxel_leaf_m'.")
     esf = descriptors.compute_esf(pts, n_samples=int(esf_n_samples), seed=seed)
     normals = descriptors.estimate_normals(pts, radius_m=radius, viewpoint_xyz_m=cloud.viewpoint_xyz_m).normals_xyz
     ok = np.isfinite(normals).all(axis=1)
@@ -305,7 +330,8 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
 # -- building ------------------------------------------------------------------------------------
 
 def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mapping[str, Mapping[str, Any]], *,
-                   vfh_variant: str | None = None, normal_radius_m: float = 0.01, esf_n_samples: int = 20000,
+                   vfh_variant: str | None = None, normal_radius_m: float = DEFAULT_NORMAL_RADIUS_M,
+                   esf_n_samples: int = 20000, voxel_leaf_m: float | None = DEFAULT_VOXEL_LEAF_M,
                    seed: int | np.random.Generator = 0, progress: bool = False) -> ViewDatabase:
     """Compute the descriptors of partial views and gather them in a :class:`ViewDatabase`.
 
@@ -318,10 +344,14 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         One entry for every label in ``views`` (extra entries are an error too).
     vfh_variant : str, optional
         VFH binning variant passed to ``compute_vfh``; None = its default (the name is recorded).
-    normal_radius_m : float, default 0.01
-        Radius of the normal estimation for the VFH, metres.
+    normal_radius_m : float, default DEFAULT_NORMAL_RADIUS_M
+        Radius of the normal estimation for the VFH, metres (3 voxels of the default grid).
     esf_n_samples : int, default 20000
         Point triplets sampled by ESF (PCL's value).
+    voxel_leaf_m : float or None, default DEFAULT_VOXEL_LEAF_M (0.005)
+        Voxel grid applied to every view before its descriptors, and recorded so that
+        :meth:`ViewDatabase.describe` applies it to queries: the segmentation's default grid, so that
+        laser clusters and Kinect views have the same density. None keeps the raw views (the papers).
     seed : int or Generator, default 0
         Every view's ESF gets its own seed drawn from it: the database is reproducible.
     progress : bool
@@ -330,6 +360,7 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     caller = "build_database"
     radius = check_positive("normal_radius_m", normal_radius_m, caller=caller)
     n_samples = check_int("esf_n_samples", esf_n_samples, caller=caller, minimum=1)
+    leaf = None if voxel_leaf_m is None else check_positive("voxel_leaf_m", voxel_leaf_m, caller=caller)
     rng = as_rng(seed, caller=caller)
     views = list(views)
     if not views:
@@ -364,12 +395,12 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     for k, (label, view_id, cloud) in iterator:
         try:
             d = compute_view_descriptors(cloud, vfh_variant=variant, normal_radius_m=radius,
-                                         esf_n_samples=n_samples, seed=int(view_seeds[k]))
+                                         esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]))
         except SemslamError as exc:
             raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
         esf[k], vfh[k] = d.esf, d.vfh
     counts = np.array([v[2].n_points for v in views], dtype=np.int64)
-    params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples,
+    params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
               "seed": seed if isinstance(seed, int) else None}
     return ViewDatabase(
         labels=np.array([str(v[0]) for v in views]),

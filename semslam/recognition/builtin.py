@@ -1,0 +1,74 @@
+"""The built-in view database (the simulator's four fittings seen by its Kinect-like camera in the survey
+geometry, :data:`~semslam.simulation.kinect.SURVEY_KINECT`), built once and cached on disk.
+
+The cache file is keyed by everything that changes its content: the database format version, the
+semslam version, the Kinect settings, the number of views, the seed and the descriptor parameters.
+It lives in ``$SEMSLAM_CACHE_DIR`` or ``~/.cache/semslam`` and is written atomically; a corrupted or
+unreadable cache file is rebuilt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from ..errors import DatabaseError
+from .database import (
+    DEFAULT_NORMAL_RADIUS_M,
+    DEFAULT_VOXEL_LEAF_M,
+    FORMAT_VERSION,
+    ViewDatabase,
+    build_database,
+    load_database,
+    save_database,
+)
+
+__all__ = ["builtin_database", "cache_dir"]
+
+
+def cache_dir() -> Path:
+    """``$SEMSLAM_CACHE_DIR`` if set, else ``~/.cache/semslam``."""
+    env = os.environ.get("SEMSLAM_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "semslam"
+
+
+def builtin_database(*, seed: int = 0, n_views: int = 8, cache: bool = True, **kwargs: Any) -> ViewDatabase:
+    """The built-in database, from the cache when an identical one was built before.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the simulated views and ESF.
+    n_views : int
+        Views per object (azimuths every 360 / n_views degrees).
+    cache : bool
+        Read and write the cache (False: always build, write nothing).
+    **kwargs
+        Passed to :func:`~semslam.recognition.build_database` (``vfh_variant``, ``normal_radius_m``,
+        ``esf_n_samples``, ``voxel_leaf_m``).
+    """
+    from .. import __version__
+    from ..simulation.kinect import SURVEY_KINECT, builtin_view_clouds
+
+    params = {"format_version": FORMAT_VERSION, "semslam": __version__, "kinect": SURVEY_KINECT.to_dict(),
+              "n_views": int(n_views), "seed": int(seed), "normal_radius_m": DEFAULT_NORMAL_RADIUS_M,
+              "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None, **kwargs}
+    key = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    path = cache_dir() / f"builtin_db_{key}.npz"
+    if cache and path.is_file():
+        try:
+            return load_database(path)
+        except DatabaseError:
+            pass  # corrupted or stale: rebuild below
+    views, classes = builtin_view_clouds(seed=seed, n_views=n_views, config=SURVEY_KINECT)
+    db = build_database(views, classes, seed=seed, **kwargs)
+    if cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            save_database(db, path)
+        except (OSError, DatabaseError):
+            pass  # a read-only home must not stop recognition
+    return db

@@ -1,0 +1,61 @@
+"""``semslam recognize``: text, --json and --out JSONL on a simulated scan, the builtin database cache, errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from semslam.cli.main import main
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from semslam.io import write_point_cloud
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+
+    m = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    path = tmp_path_factory.mktemp("scene") / "scan.pcd"
+    write_point_cloud(path, m.load_scan(17))  # the ball valve, whole, and the tank's slope
+    return path
+
+
+@pytest.fixture
+def cache(tmp_path_factory, monkeypatch):
+    d = tmp_path_factory.getbasetemp() / "semslam_cache"
+    monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(d))
+    return d
+
+
+def test_recognize_builtin_json_and_jsonl(scene, cache, tmp_path, capsys):
+    out = tmp_path / "det.jsonl"
+    assert main(["recognize", str(scene), "--db", "builtin", "--no-pose", "--out", str(out), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert [d["label"] for d in payload["detections"]] == ["ball_valve"]
+    assert len(list(cache.glob("builtin_db_*.npz"))) == 1  # cached for the next run
+    det = payload["detections"][0]
+    assert set(det["T_sensor_object"]) >= {"matrix", "xyz_m", "rpy_rad", "quat_wxyz"}
+    rejected = [c for c in payload["clusters"] if not c["detected"]]
+    assert rejected and all(c["label"] == "unknown" and c["reason"].startswith("rejected") for c in rejected)
+    assert {"segmentation", "descriptors", "matching", "pose", "total", "load_db"} <= set(payload["timings_ms"])
+    lines = out.read_text().splitlines()
+    assert [json.loads(s)["label"] for s in lines] == ["ball_valve"]
+
+
+def test_recognize_text_with_pose_from_a_db_file(scene, cache, tmp_path, capsys):
+    from semslam.recognition import save_database
+    from semslam.recognition.builtin import builtin_database
+
+    db_path = save_database(builtin_database(seed=0), tmp_path / "db.npz")
+    assert main(["recognize", str(scene), "--db", str(db_path), "--descriptor", "esf", "--seed", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "ball_valve" in text and "xyz_m" in text and "quat_wxyz" in text and "T_scanner_object" in text
+    assert "covariance_6x6" in text and "reliable" in text and "rejected as unknown:" in text
+    assert "too big for any class" in text and "timings (ms):" in text
+
+
+def test_recognize_errors(scene, tmp_path, capsys):
+    assert main(["recognize", str(scene), "--db", str(tmp_path / "missing.npz")]) != 0
+    assert "missing.npz" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["recognize", str(scene), "--db", "builtin", "--descriptor", "fpfh"])
