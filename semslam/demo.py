@@ -67,7 +67,7 @@ class DemoConfig:
     loops: int | None = None
     modes: tuple = MODES
     use_unreliable: bool = False
-    descriptor: str = "esf"
+    descriptor: str = "esf+vfh"
     classifier: str = "chi2"
     extras: dict = field(default_factory=dict)
 
@@ -114,6 +114,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     """
     from .recognition import build_database, leave_one_out, save_database
     from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission, write_mission
+    from .simulation.kinect import SURVEY_KINECT
 
     cfg = DemoConfig() if config is None else config
     out = Path(out_dir)
@@ -126,7 +127,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     t_start = time.perf_counter()
 
     # 1. the built-in database and its leave-one-out evaluation (the papers' Tables 1 and 2)
-    views, classes = stages.run("acquire database views (Kinect-like)", builtin_view_clouds, seed=cfg.seed)
+    views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
+                                seed=cfg.seed, config=SURVEY_KINECT)
     db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed)
     save_database(db, out / "db.npz")
     evaluations = {}
