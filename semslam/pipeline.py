@@ -90,6 +90,10 @@ class PipelineConfig:
         Coarse alignment, ICP, covariance and reliability thresholds.
     estimate_pose : bool
         False stops after recognition (detections then carry an identity pose and an infinite-like covariance).
+    ambiguous_rotation_variance_rad2 : float
+        Added to the rotation variances of a pose that aligns well but whose orientation is ambiguous (another,
+        non-equivalent orientation scores within ``pose.min_score_margin``): 0.25 rad^2 (~29 degrees). Such a
+        detection stays usable for its position (``extras["orientation_ambiguous"]``).
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -105,9 +109,11 @@ class PipelineConfig:
     pose_model: str = "fused"
     pose: PoseConfig = field(default_factory=PoseConfig)
     estimate_pose: bool = True
+    ambiguous_rotation_variance_rad2: float = 0.25
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
+        check_positive("ambiguous_rotation_variance_rad2", self.ambiguous_rotation_variance_rad2, caller=c)
         check_choice("descriptor", self.descriptor, ("esf", "vfh", "esf+vfh"), caller=c)
         check_choice("classifier", self.classifier, CLASSIFIERS, caller=c)
         check_choice("rejection", self.rejection, ("global", "per_class", "none"), caller=c)
@@ -359,9 +365,24 @@ class ScanRecognizer:
         pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=self.config.pose, seed=seed,
                                     viewpoint_xyz_m=scan.viewpoint_xyz_m)
         timings["pose"] += (time.perf_counter() - t0) * 1e3
-        return Detection(label, match.distance, pose.T_scanner_object, pose.covariance_6x6, score_kind="chi2",
+        cov = pose.covariance_6x6
+        pc = self.config.pose
+        aligned = (pose.fitness >= pc.min_fitness and pose.rmse_m <= pc.max_rmse_m
+                   and not (np.isfinite(pose.visibility) and pose.visibility > pc.max_visibility))
+        ambiguous = (not pose.reliable and aligned and np.isfinite(pose.score_margin)
+                     and pose.score_margin < pc.min_score_margin)
+        extras["pose_visibility"] = float(pose.visibility)
+        extras["pose_score_margin"] = float(pose.score_margin)
+        if ambiguous:
+            # The cluster is well aligned but another, non-equivalent orientation fits almost as well (a
+            # near-symmetric view): the position is trustworthy, the orientation is not. Say so in the
+            # covariance instead of dropping the detection; the filter's cascade then uses the position.
+            cov = cov.copy()
+            cov[3:, 3:] += np.eye(3) * self.config.ambiguous_rotation_variance_rad2
+            extras["orientation_ambiguous"] = True
+        return Detection(label, match.distance, pose.T_scanner_object, cov, score_kind="chi2",
                          fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=len(points),
-                         reliable=bool(pose.reliable and not touches_border),
+                         reliable=bool((pose.reliable or ambiguous) and not touches_border),
                          stamp_s=stamp_s, scan_id=scan_id, extras=extras)
 
 
