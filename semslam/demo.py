@@ -136,7 +136,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         for clf_name in ("svm", "chi2"):
             clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
             res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
-                             descriptor=descriptor, classifier=clf, seed=cfg.seed)
+                             descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1)
             evaluations[f"{descriptor}_{clf_name}"] = res
             _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
 

@@ -116,3 +116,17 @@ def test_loo_errors():
         leave_one_out(db.subset([0]))
     with pytest.raises(RecognitionError, match="'db'"):
         leave_one_out("db.npz")
+
+
+def test_parallel_folds_give_the_same_result():
+    """n_jobs changes the speed only: every fold's seed is drawn before any fold is fitted."""
+    esf, labels = separable(n_per_class=5, seed=3)
+    esf[0] = esf[12]  # a planted confusion, so that the comparison covers a wrong prediction too
+    db = make_db(esf, labels)
+    svm = SvmClassifier(c_log2=(-1, 7, 4), gamma_log2=(-9, -1, 4), cv=3, seed=0)
+    a = leave_one_out(db, descriptor="esf", classifier=svm, seed=1, n_jobs=1)
+    b = leave_one_out(db, descriptor="esf", classifier=svm, seed=1, n_jobs=2)
+    assert a.accuracy < 1.0
+    np.testing.assert_array_equal(a.predicted, b.predicted)
+    np.testing.assert_array_equal(a.confusion, b.confusion)
+    assert a.details == b.details

@@ -19,6 +19,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--classifier", choices=("chi2", "svm"), default="chi2",
                         help="chi-square nearest view, or RBF SVM with Hsu et al.'s grid search (default chi2)")
     parser.add_argument("--seed", type=int, default=0, help="seed (SVM folds; ESF when building from a folder)")
+    parser.add_argument("--jobs", type=int, default=-1,
+                        help="processes fitting the SVM folds (default -1: every core; the result does not depend on it)")
     parser.set_defaults(func=run)
 
 
@@ -30,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     source = Path(args.source)
     db = build_database_from_folder(source, seed=args.seed) if source.is_dir() else load_database(source)
-    result = leave_one_out(db, descriptor=args.descriptor, classifier=args.classifier, seed=args.seed)
+    result = leave_one_out(db, descriptor=args.descriptor, classifier=args.classifier, seed=args.seed,
+                           n_jobs=args.jobs)
     emit(args, {"source": str(source), **result.to_dict()}, result.format_table)
     return 0

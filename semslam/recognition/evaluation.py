@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_rng, check_choice
+from .._validation import as_rng, check_choice, check_int
 from ..errors import RecognitionError
 from . import _chi2_kernels
 from .database import DESCRIPTORS, ViewDatabase
@@ -97,7 +97,7 @@ def confusion_matrix(actual: Any, predicted: Any, labels: Any) -> np.ndarray:
 
 
 def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str | Any = "chi2",
-                  seed: int | np.random.Generator = 0) -> EvaluationResult:
+                  seed: int | np.random.Generator = 0, n_jobs: int = 1) -> EvaluationResult:
     """Classify every view of ``db`` with a classifier trained on all the other views.
 
     Parameters
@@ -112,6 +112,9 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         (an estimator with rejection) count as errors and appear in no column of the confusion matrix.
     seed : int or Generator
         Seeds the SVM cross-validation folds.
+    n_jobs : int
+        Processes fitting the folds of a trained classifier in parallel (joblib; -1 = every core). The result
+        does not depend on it: every fold's estimator and seed are fixed before any is fitted.
     """
     if not isinstance(db, ViewDatabase):
         raise RecognitionError(f"The 'db' argument of leave_one_out must be a ViewDatabase. Got {type(db).__name__} instead.")
@@ -132,18 +135,16 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         predicted = y[nearest]
         name = "chi2"
     else:
-        predicted = np.empty(len(y), dtype=object)
-        chosen = []
-        for i in range(len(y)):  # one fit per fold: inherent to leave-one-out
-            train = np.arange(len(y)) != i
-            if classifier == "svm":
-                est: Any = SvmClassifier(seed=int(rng.integers(2**31 - 1)))
-            else:
-                est = _fresh(classifier)
-            est.fit(X[train], y[train])
-            predicted[i] = str(np.asarray(est.predict(X[i:i + 1]))[0])
-            if hasattr(est, "C_"):
-                chosen.append({"C": est.C_, "gamma": est.gamma_})
+        from joblib import Parallel, delayed
+
+        check_int("n_jobs", n_jobs, caller="leave_one_out", minimum=-1)
+        estimators = []
+        for _ in range(len(y)):  # one fit per fold: inherent to leave-one-out; seeds drawn in fold order
+            estimators.append(SvmClassifier(seed=int(rng.integers(2**31 - 1))) if classifier == "svm"
+                              else _fresh(classifier))
+        folds = Parallel(n_jobs=n_jobs or 1)(delayed(_fit_predict_fold)(est, X, y, i) for i, est in enumerate(estimators))
+        predicted = np.array([p for p, _ in folds], dtype=object)
+        chosen = [c for _, c in folds if c is not None]
         predicted = predicted.astype(str)
         name = classifier if isinstance(classifier, str) else type(classifier).__name__
         if chosen:
@@ -154,6 +155,14 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
     recall = {lab: float(confusion[k, k] / totals[k]) if totals[k] else float("nan") for k, lab in enumerate(labels)}
     return EvaluationResult(labels, confusion, float(np.mean(predicted == y)), recall, y, predicted,
                             db.view_ids.astype(str), distances, descriptor, name, details)
+
+
+def _fit_predict_fold(est: Any, X: np.ndarray, y: np.ndarray, i: int) -> tuple[str, dict | None]:
+    """Fit ``est`` on every row but ``i`` and predict row ``i``; also the SVM's chosen parameters."""
+    train = np.arange(len(y)) != i
+    est.fit(X[train], y[train])
+    chosen = {"C": est.C_, "gamma": est.gamma_} if hasattr(est, "C_") else None
+    return str(np.asarray(est.predict(X[i:i + 1]))[0]), chosen
 
 
 def _fresh(estimator: Any) -> Any:
