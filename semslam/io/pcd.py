@@ -145,16 +145,22 @@ class PcdData:
                 )
             keep = self.valid_mask
 
+        rows = None if keep is None else np.flatnonzero(keep)
+
         def take(a: np.ndarray) -> np.ndarray:
-            return a if keep is None else a[keep]
+            return a if rows is None else a.take(rows, axis=0)
+
+        def columns(names: tuple[str, str, str]) -> np.ndarray:
+            out = np.empty((self.n_points if rows is None else len(rows), 3), dtype=np.float64)
+            for j, c in enumerate(names):
+                out[:, j] = take(f[c])
+            return out
 
         f = self.fields
-        pts = np.stack([take(f[c]).astype(np.float64) for c in ("x", "y", "z")], axis=1)
+        pts = columns(("x", "y", "z"))
         normals = None
         if all(c in f and f[c].ndim == 1 for c in ("normal_x", "normal_y", "normal_z")):
-            normals = np.stack(
-                [take(f[c]).astype(np.float64) for c in ("normal_x", "normal_y", "normal_z")], 1
-            )
+            normals = columns(("normal_x", "normal_y", "normal_z"))
         intensity = (
             take(f["intensity"]).astype(np.float64)
             if "intensity" in f and f["intensity"].ndim == 1
