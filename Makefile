@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/semslam demo --out $(DEMO_OUT)
+	$(VENV)/bin/semslam demo --out $(DEMO_OUT) --overwrite
 
 test: $(STAMP)
 	$(VPY) -m pytest -q -n 2 --dist loadfile
