@@ -3,16 +3,27 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from semslam.cli.main import main
+from semslam.errors import SlamError
 from semslam.geometry import rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
-from semslam.slam.consensus import ConsensusInitializer, Observation, attitude_distance, quaternion_mean
-from semslam.slam.detections import (TruthDetectionConfig, read_detections_jsonl, simulate_detections,
-                                     write_detections_jsonl)
+from semslam.slam.consensus import (
+    ConsensusInitializer,
+    Observation,
+    attitude_distance,
+    quaternion_mean,
+)
+from semslam.slam.detections import (
+    TruthDetectionConfig,
+    read_detections_jsonl,
+    simulate_detections,
+    write_detections_jsonl,
+)
 from semslam.slam.runner import SlamConfig, run_slam
 from semslam.slam.synthetic import square_mission
 
@@ -135,3 +146,37 @@ def test_montecarlo_reports_anees_band(tmp_path):
     assert s["pose"]["final_3sigma_mean_m"] < s["dr"]["final_3sigma_mean_m"]
     write_montecarlo(res, tmp_path)
     assert "| pose |" in (tmp_path / "summary.md").read_text()
+
+
+def test_each_detection_is_processed_at_its_own_stamp(mission):
+    # merging pairs of scans into one scan id (each detection keeping its own stamp, as the pipeline's
+    # per-cluster median stamps do) must not change the run: the filter uses the detection's stamp, not the
+    # scan's last one (that would place the earlier detections with a vehicle pose ~0.3 s too late)
+    dets = simulate_detections(mission, TruthDetectionConfig(), seed=3)
+    ids = sorted(dets)
+    merged: dict = {}
+    for k, sid in enumerate(ids):
+        merged.setdefault(ids[k - k % 2], []).extend(dets[sid])
+    assert len(merged) < len(dets)
+    assert any(len({d.stamp_s for d in v}) > 1 for v in merged.values())
+    a = run_slam(mission, dets, mode="pose", seed=0, symmetries={})
+    b = run_slam(mission, merged, mode="pose", seed=0, symmetries={})
+    np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-12)
+    assert b.metrics["landmark_updates"] == a.metrics["landmark_updates"]
+    bad = {ids[0]: [replace(dets[ids[0]][0], stamp_s=float("nan"))]}
+    with pytest.raises(SlamError, match="stamp_s"):
+        run_slam(mission, bad, mode="pose", seed=0, symmetries={})
+
+
+def test_interpolated_attitude_noise_is_scaled(mission):
+    from semslam.slam.runner import _Runner
+
+    r = _Runner(mission, SlamConfig.for_mission(mission), "pose", {}, np.random.default_rng(0))
+    ts = r._att_t
+    mid = 0.5 * (ts[10] + ts[11])
+    rpy, f = r.attitude_at(mid)
+    np.testing.assert_allclose(rpy, [np.interp(mid, ts, r._att[:, i]) for i in range(3)], atol=1e-15)
+    assert f == pytest.approx(0.5)  # the mean of two independent samples: half the variance
+    assert r.attitude_at(ts[10])[1] == pytest.approx(1.0)
+    assert r.attitude_at(ts[0] - 1.0)[1] == 1.0 and r.attitude_at(ts[-1] + 1.0)[1] == 1.0
+    np.testing.assert_allclose(r.attitude_cov_world(rpy, f), 0.5 * r.attitude_cov_world(rpy), rtol=1e-12)

@@ -6,6 +6,8 @@ perturbation* ``w`` acts on the left: ``R' = Exp(w) R``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import blas
 
@@ -37,12 +39,24 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: rotation matrix of a rotation vector (3,)."""
-    th = float(np.linalg.norm(w))
-    K = skew(w)
-    if th < 1e-8:
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + np.sin(th) / th * K + (1.0 - np.cos(th)) / th**2 * K @ K
+    """Rodrigues' formula: rotation matrix of a rotation vector (3,) (plain floats: called per event)."""
+    x, y, z = (float(c) for c in np.asarray(w, dtype=float).reshape(3))
+    th2 = x * x + y * y + z * z
+    th = math.sqrt(th2)
+    if th < 1e-8:  # second-order series: I + K + K^2 / 2
+        a, b = 1.0, 0.5
+    else:
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    # I + a K + b K^2 with K^2 = w w^T - |w|^2 I
+    return np.array([[1.0 + b * (x * x - th2), -a * z + b * x * y, a * y + b * x * z],
+                     [a * z + b * x * y, 1.0 + b * (y * y - th2), -a * x + b * y * z],
+                     [-a * y + b * x * z, a * x + b * y * z, 1.0 + b * (z * z - th2)]])
+
+
+def rot_z(angle: float) -> np.ndarray:
+    """Rotation by ``angle`` (rad) about the z axis."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:
@@ -150,6 +164,8 @@ def joseph_update(P, x, loc, Hc, nu, Rn):
 def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw, i_yaw, i_dvl, dvl_a, dvl_q, slope_a, slope_q):
     """In-place constant-velocity prediction of the vehicle rows of ``(x, P)``; returns ``F`` (nv, nv).
 
+    ``q`` (3,): spectral densities (m^2/s^3) of the white body-frame acceleration (surge, sway, heave).
+
     ``i_yaw`` / ``i_dvl``: index of the yaw-bias state / first DVL-calibration state (-1 when absent); the
     DVL bias decays by ``dvl_a = exp(-dt / tau)`` and gains ``dvl_q = sigma^2 (1 - a^2)`` per axis, the DVL
     slope bias (the next three states) likewise with ``slope_a`` / ``slope_q``.
@@ -178,12 +194,16 @@ def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw, i_yaw, i_dvl, dvl_a, d
     left = np.ascontiguousarray(P[:, :nv]) @ F.T
     P[:, :nv] = left
     Q = np.zeros((nv, nv))
+    # white body-frame acceleration of spectral densities q[0..2] (surge, sway, heave), rotated by R
     for i in range(3):
-        Q[i, i] = q * dt ** 3 / 3.0
-        Q[3 + i, 3 + i] = q * dt
+        Q[3 + i, 3 + i] = q[i] * dt
         for j in range(3):
-            Q[i, 3 + j] = q * dt ** 2 / 2.0 * R[i, j]
+            Q[i, 3 + j] = q[j] * dt ** 2 / 2.0 * R[i, j]
             Q[3 + j, i] = Q[i, 3 + j]
+            s = 0.0
+            for k in range(3):
+                s += R[i, k] * q[k] * R[j, k]
+            Q[i, j] = s * dt ** 3 / 3.0
     Dx = np.array([[0.0, -d[2], d[1]], [d[2], 0.0, -d[0]], [-d[1], d[0], 0.0]])
     Qa = Dx @ att_cov @ Dx.T
     for i in range(3):

@@ -82,7 +82,34 @@ class SemanticEkf:
         self.x[3:6] = velocity_body_mps
         self.P = np.ascontiguousarray(0.5 * (P0 + P0.T))
         self.landmarks: list[LandmarkInfo] = []
+        self._N: np.ndarray | None = None
+        self._q_cache: dict = {}
         self._set_active(np.arange(self.n_v))
+
+    # ------------------------------------------------------------------ observability constraint
+    def constrain_heading_nullspace(self, enable: bool = True) -> None:
+        """Observability-constrained EKF (Huang, Mourikis & Roumeliotis 2010) for the yaw bias.
+
+        With a yaw-bias state and only relative observations, a common rotation about the vertical of the
+        trajectory and the map together with an opposite change of the bias changes no measurement: the
+        direction ``N`` (``dp = e_z x (p - p_0)``, ``db = -1``, per landmark ``dl = e_z x (l - p_0)``,
+        ``dyaw = +1``) is unobservable. The EKF evaluates its Jacobians at estimates that move between steps and
+        so gains spurious information along ``N`` (its bias variance shrinks, its bias estimate wanders and the
+        map rotates with it). Enabled, ``N`` is propagated with the filter's own ``F`` and ``G`` and every
+        measurement Jacobian is replaced by the closest ``H'`` with ``H' N = 0``. Surveyed landmarks make the
+        direction observable: :meth:`add_prior_landmarks` switches the constraint off.
+        """
+        if not enable or not self.yaw_bias:
+            self._N = None
+            return
+        self.flush()
+        N = np.zeros(self.n)
+        N[self.i_yaw] = -1.0
+        p = self.x[0:3]
+        for lm in self.landmarks:
+            N[lm.offset:lm.offset + 3] = np.cross(_EZ, self.x[lm.offset:lm.offset + 3] - p)
+            N[lm.offset + 5] = 1.0
+        self._N = N
 
     # ------------------------------------------------------------------ active set / compression
     @property
@@ -199,15 +226,16 @@ class SemanticEkf:
         """Vehicle rotation corrected by the estimated yaw bias: ``Rz(-b) R_ahrs``."""
         if not self.yaw_bias:
             return R_wv_ahrs
-        return kern.axis_rotation(_EZ, -self.xa[self.i_yaw]) @ R_wv_ahrs
+        return kern.rot_z(-float(self.xa[self.i_yaw])) @ R_wv_ahrs
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, dt_s: float, R_wv_ahrs: np.ndarray, *, velocity_rw: float,
+    def predict(self, dt_s: float, R_wv_ahrs: np.ndarray, *, velocity_rw,
                 attitude_cov_world: np.ndarray | None = None, yaw_bias_rw: float = 0.0, dvl_on_slope: bool = False) -> None:
         """Constant-velocity prediction over ``dt_s`` with the AHRS attitude as input.
 
         ``p += R v dt``, ``v`` constant, landmarks static. Process noise: white acceleration of spectral
-        density ``velocity_rw**2`` (m^2/s^3) in the body frame, the AHRS attitude error (world-frame
+        density ``velocity_rw**2`` (m^2/s^3) in the body frame (``velocity_rw`` a number, or three numbers
+        for surge, sway and heave), the AHRS attitude error (world-frame
         rotation covariance ``attitude_cov_world``, rad^2) mapped through ``[R v dt]x``, and a yaw-bias
         random walk ``yaw_bias_rw`` (rad/sqrt(s)).
         """
@@ -218,13 +246,20 @@ class SemanticEkf:
         a = float(np.exp(-dt_s / self.dvl_bias_tau_s))
         a2 = float(np.exp(-dt_s / self.dvl_slope_bias_tau_s))
         q2 = self.dvl_slope_bias_sigma_mps**2 * (1.0 - a2 * a2) if dvl_on_slope else 0.0
-        F = kern.predict_vehicle(self.Paa, self.xa, np.ascontiguousarray(R), float(dt_s), float(velocity_rw) ** 2,
+        q = self._q_cache.get(velocity_rw) if isinstance(velocity_rw, (float, int, tuple)) else None
+        if q is None:
+            q = np.ascontiguousarray(np.broadcast_to(np.asarray(velocity_rw, dtype=float), (3,)) ** 2)
+            if isinstance(velocity_rw, (float, int, tuple)):
+                self._q_cache[velocity_rw] = q
+        F = kern.predict_vehicle(self.Paa, self.xa, np.ascontiguousarray(R), float(dt_s), q,
                                  np.ascontiguousarray(att, dtype=float), self.n_v, float(yaw_bias_rw), self.i_yaw,
                                  self.i_dvl, a, self.dvl_bias_sigma_mps**2 * (1.0 - a * a), a2, q2)
         if self.compressed:
             nv = self.n_v
             self._phi[:nv, :] = F @ self._phi[:nv, :]
             self._dirty = True
+        if self._N is not None:
+            self._N[:self.n_v] = F @ self._N[:self.n_v]
 
     # ------------------------------------------------------------------ updates
     def innovation_cov(self, idx, Hc: np.ndarray, Rn: np.ndarray) -> np.ndarray:
@@ -241,6 +276,12 @@ class SemanticEkf:
         loc = self._loc[np.asarray(idx, dtype=np.intp)]
         if (loc < 0).any():
             raise SlamError("SemanticEkf.update touches a passive state; call set_active_landmarks first.")
+        if self._N is not None:
+            u = self._N[np.asarray(idx, dtype=np.intp)]
+            uu = float(u @ u)
+            if uu > 0.0:
+                Hc = np.asarray(Hc, dtype=float)
+                Hc = Hc - np.outer(Hc @ u, u) / uu
         K, S = kern.joseph_update(self.Paa, self.xa, loc, np.ascontiguousarray(Hc, dtype=float),
                                   np.ascontiguousarray(nu, dtype=float), np.ascontiguousarray(Rn, dtype=float))
         if self.compressed:
@@ -251,8 +292,12 @@ class SemanticEkf:
             self._psi = 0.5 * (psi + psi.T)
             self._phi -= K @ HPhi
             self._dirty = True
-        if len(self._A) > self.n_v:
+        # angles are wrapped after updates that touch the landmark block (a vehicle-only update moves them by
+        # far less than a turn; the next landmark update wraps them)
+        if len(self._A) > self.n_v and loc.max() >= self.n_v:
             self._normalize_angles()
+        elif self.yaw_bias and abs(self.xa[self.i_yaw]) > np.pi:
+            self.xa[self.i_yaw] = kern_wrap(self.xa[self.i_yaw])
 
     def _normalize_angles(self) -> None:
         nv = self.n_v
@@ -295,6 +340,8 @@ class SemanticEkf:
         P[n:, n:] = 0.5 * (Pll + Pll.T)
         self.P = P
         self.x = np.concatenate([self.x, pose_xyzrpy])
+        if self._N is not None:
+            self._N = np.concatenate([self._N, G @ self._N[:nv]])
         self.landmarks.append(LandmarkInfo(label, n, stamp_s, stamp_s, 0, name))
         self._set_active(np.concatenate([self._A, n + np.arange(6)]))
         return len(self.landmarks) - 1
@@ -312,6 +359,7 @@ class SemanticEkf:
             P[s:s + 6, s:s + 6] = covs[j]
         self.P = P
         self.x = np.concatenate([self.x, poses.ravel()])
+        self._N = None  # a surveyed landmark fixes the heading: nothing left unobservable to protect
         ids = []
         for j in range(m):
             self.landmarks.append(LandmarkInfo(labels[j], n + 6 * j, stamp_s, stamp_s, 0,

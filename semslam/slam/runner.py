@@ -2,8 +2,10 @@
 
 Modes: ``dr`` (DVL + depth + AHRS dead reckoning), ``position`` (object positions only), ``pose`` (the
 papers' cascade: full-pose test, else position test), ``pose+heading`` (``pose`` with an AHRS yaw-bias
-state). Events (DVL, depth, scans, history epochs) are processed in time order; the prediction runs in
-steps of at most ``max_predict_dt_s`` with the AHRS attitude interpolated at each step's midpoint.
+state; observability-constrained when no landmark is surveyed, since a constant bias is then unobservable).
+Events (DVL, depth, each detection at its own stamp, history epochs) are processed in time order; the
+prediction runs in steps of at most ``max_predict_dt_s`` with the AHRS attitude interpolated at each step's
+midpoint (the interpolation halves at most the variance of the AHRS white noise; the filter accounts for it).
 The filter starts at the true initial position (a surface fix before diving).
 """
 
@@ -26,7 +28,13 @@ from ..geometry import rotation_from_rpy, rpy_from_rotation
 from ..simulation.mission import Mission
 from ..symmetry import Symmetry
 from . import _ekf_kernels as kern
-from .association import (GateThresholds, associate, associate_jcbb, innovation, measurement_from_detection)
+from .association import (
+    GateThresholds,
+    associate,
+    associate_jcbb,
+    innovation,
+    measurement_from_detection,
+)
 from .consensus import ConsensusInitializer, Observation
 from .detections import TruthDetectionConfig, simulate_detections
 from .ekf import SemanticEkf
@@ -40,7 +48,9 @@ _EZ = np.array([0.0, 0.0, 1.0])
 class SlamConfig:
     """Filter settings (SI units, radians). :meth:`for_mission` takes the sensor noise from the mission."""
 
-    velocity_rw_mps_per_sqrt_s: float = 0.05
+    #: white body-frame acceleration noise (m/s/sqrt(s)): one number, or (surge, sway, heave). The default follows
+    #: the vehicle: surge changes at the corners (truth: rms ~0.02, peaks 0.1), little sway or heave
+    velocity_rw_mps_per_sqrt_s: float | tuple = (0.05, 0.01, 0.02)
     dvl_noise_abs_mps: float = 0.001
     dvl_noise_rel: float = 0.003
     dvl_max_speed_mps: float = 1.5
@@ -58,6 +68,9 @@ class SlamConfig:
     propagate_attitude_noise: bool = True
     yaw_bias_sigma_rad: float = math.radians(3.0)
     yaw_bias_rw_rad_per_sqrt_s: float = 0.0
+    #: pose+heading without surveyed landmarks: keep the unobservable common rotation (map, trajectory and bias)
+    #: unobservable (observability-constrained EKF, see SemanticEkf.constrain_heading_nullspace)
+    observability_constrained: bool = True
     initial_position_sigma_m: float = 0.01
     initial_velocity_sigma_mps: float = 0.05
     perturb_initial_position: bool = True
@@ -82,6 +95,16 @@ class SlamConfig:
     detections: TruthDetectionConfig = field(default_factory=TruthDetectionConfig)
 
     def __post_init__(self) -> None:
+        vrw = self.velocity_rw_mps_per_sqrt_s
+        if not isinstance(vrw, (int, float)):
+            try:
+                vrw = tuple(float(x) for x in vrw)
+            except (TypeError, ValueError):
+                vrw = ()
+            if len(vrw) != 3 or not all(math.isfinite(x) and x >= 0 for x in vrw):
+                raise ConfigError("The 'velocity_rw_mps_per_sqrt_s' field of SlamConfig must be a number or three "
+                                  f"finite numbers >= 0 (surge, sway, heave). Got {self.velocity_rw_mps_per_sqrt_s!r} instead.")
+            object.__setattr__(self, "velocity_rw_mps_per_sqrt_s", vrw)
         check_choice("association", self.association, ("nn", "jcbb"), caller="SlamConfig")
         check_choice("orientation_innovation", self.orientation_innovation, ("rotvec", "rpy"), caller="SlamConfig")
         for f in fields(self):
@@ -109,6 +132,8 @@ class SlamConfig:
         d["detections"] = self.detections.to_dict()
         d["ahrs_sigma_rpy_rad"] = list(self.ahrs_sigma_rpy_rad)
         d["surveyed_objects"] = list(self.surveyed_objects)
+        if isinstance(self.velocity_rw_mps_per_sqrt_s, tuple):
+            d["velocity_rw_mps_per_sqrt_s"] = list(self.velocity_rw_mps_per_sqrt_s)
         return d
 
     @classmethod
@@ -198,6 +223,7 @@ class SlamResult:
     metrics: dict
     config: SlamConfig
     dvl_calibration: np.ndarray | None = None  #: (K, 8) [b (3), slope b (3) (m/s), k, delta (rad)] if estimated
+    yaw_bias_var_rad2: np.ndarray | None = None  #: (K,) variance of the yaw-bias estimate (pose+heading mode)
 
     @property
     def position_error_m(self) -> np.ndarray | None:
@@ -301,23 +327,41 @@ class _Runner:
 
     # ------------------------------------------------------------------ helpers
     def attitude(self, t: float) -> np.ndarray:
-        return np.array([np.interp(t, self._att_t, self._att[:, i]) for i in range(3)])
+        """AHRS roll, pitch, yaw (unwrapped) linearly interpolated at ``t`` (held beyond the ends, as np.interp)."""
+        return self.attitude_at(t)[0]
 
-    def attitude_cov_world(self, rpy: np.ndarray) -> np.ndarray | None:
+    def attitude_at(self, t: float) -> tuple[np.ndarray, float]:
+        """``(rpy, f)``: the interpolated AHRS attitude and the factor ``f = (1 - w)^2 + w^2`` by which the
+        interpolation (weight ``w``) of two samples with independent white errors scales their variance."""
+        a, ts = self._att, self._att_t
+        i = int(np.searchsorted(ts, t))
+        if i == 0:
+            return a[0].copy(), 1.0
+        if i >= len(ts):
+            return a[-1].copy(), 1.0
+        t0, t1 = ts[i - 1], ts[i]
+        if t1 <= t0:
+            return a[i].copy(), 1.0
+        w = (t - t0) / (t1 - t0)
+        return a[i - 1] + w * (a[i] - a[i - 1]), (1.0 - w) ** 2 + w * w
+
+    def attitude_cov_world(self, rpy: np.ndarray, var_factor: float = 1.0) -> np.ndarray | None:
+        """World-frame rotation covariance (rad^2) of the AHRS attitude ``rpy`` (its white noise, scaled by
+        ``var_factor`` for an interpolated attitude); None when attitude noise is not propagated."""
         if not self.cfg.propagate_attitude_noise:
             return None
         E = kern.rpy_to_world_rate(rpy)
-        return E @ self._ahrs_var @ E.T
+        return E @ (self._ahrs_var * var_factor) @ E.T
 
     def predict_to(self, t: float) -> None:
         cfg, ekf = self.cfg, self.ekf
         while self.t < t - 1e-12:
             dt = min(cfg.max_predict_dt_s, t - self.t)
-            rpy = self.attitude(self.t + dt / 2)
+            rpy, f = self.attitude_at(self.t + dt / 2)
             R = rotation_from_rpy(*rpy)
             slope = self._over_slope is not None and ekf.dvl_calibration and self._over_slope(ekf.xa[0:3], R)
             ekf.predict(dt, R, velocity_rw=cfg.velocity_rw_mps_per_sqrt_s,
-                        attitude_cov_world=self.attitude_cov_world(rpy), yaw_bias_rw=cfg.yaw_bias_rw_rad_per_sqrt_s,
+                        attitude_cov_world=self.attitude_cov_world(rpy, f), yaw_bias_rw=cfg.yaw_bias_rw_rad_per_sqrt_s,
                         dvl_on_slope=bool(slope))
             self.t += dt
 
@@ -357,6 +401,7 @@ class _Runner:
             var0 += [cfg.yaw_bias_sigma_rad**2]
         ekf.P[...] = np.diag(var0)
         ekf._set_active(np.arange(ekf.n_v))
+        ekf.constrain_heading_nullspace(heading and cfg.observability_constrained)
         self.ekf = ekf
         self.t = t0
         if cfg.surveyed_objects:
@@ -366,14 +411,22 @@ class _Runner:
         ev = []
         ev += [(float(t), 1, "dvl", i) for i, t in enumerate(m.dvl.stamp_s) if t >= t0]
         ev += [(float(t), 2, "depth", i) for i, t in enumerate(m.depth.stamp_s) if t >= t0]
+        groups: dict = {}
         if self.mode != "dr":
+            # each detection at its own stamp (the pipeline stamps a detection with the median time of its
+            # cluster's points: a line scanner sees each object at its own time); one event per distinct stamp
             for sid, dets in detections_by_scan.items():
-                if dets:
-                    ev.append((float(max(d.stamp_s for d in dets)), 3, "scan", sid))
+                for d in dets:
+                    st = float(d.stamp_s)
+                    if not math.isfinite(st):
+                        raise SlamError(f"Every detection given to run_slam needs a finite 'stamp_s'. Got {d.stamp_s!r} "
+                                        f"in scan {sid} instead.")
+                    groups.setdefault((st, sid), []).append(d)
+            ev += [(st, 3, "scan", key) for key in groups for st in (key[0],)]
         hist_t = np.arange(t0, t_end + 1e-9, 1.0 / cfg.history_rate_hz)
         ev += [(float(t), 4, "hist", i) for i, t in enumerate(hist_t)]
         ev.sort(key=lambda e: (e[0], e[1]))
-        H = {"t": [], "p": [], "Pp": [], "v": [], "Pv": [], "b": [], "c": []}
+        H = {"t": [], "p": [], "Pp": [], "v": [], "Pv": [], "b": [], "bv": [], "c": []}
         for t, _, kind, i in ev:
             self.predict_to(t)
             if kind == "dvl":
@@ -381,7 +434,7 @@ class _Runner:
             elif kind == "depth":
                 self.update_depth(t, i)
             elif kind == "scan":
-                self.process_scan(t, detections_by_scan[i])
+                self.process_scan(t, groups[i])
             else:
                 ekf = self.ekf
                 H["t"].append(t)
@@ -390,6 +443,7 @@ class _Runner:
                 H["v"].append(ekf.xa[3:6].copy())
                 H["Pv"].append(ekf.Paa[3:6, 3:6].copy())
                 H["b"].append(ekf.yaw_bias_rad())
+                H["bv"].append(float(ekf.Paa[ekf.i_yaw, ekf.i_yaw]) if ekf.yaw_bias else 0.0)
                 H["c"].append(ekf.dvl_calibration_state())
         return self._result(H)
 
@@ -422,9 +476,15 @@ class _Runner:
     # ------------------------------------------------------------------ sensor updates
     def _linear_update(self, t, kind, idx, Hc, z, Rn, dof) -> None:
         ekf = self.ekf
-        nu = z - Hc @ ekf.mean(idx)
-        S = ekf.innovation_cov(idx, Hc, Rn)
-        d2 = kern.mahalanobis2(nu, S)
+        loc = ekf._loc[idx[0]] if len(idx) == 1 else -1
+        if loc >= 0:  # scalar fast path (depth): no index gymnastics
+            h = float(Hc[0, 0])
+            nu = z - h * ekf.xa[loc]
+            s = h * h * ekf.Paa[loc, loc] + float(Rn[0, 0])
+            d2 = float(nu[0] * nu[0] / s) if s > 0 else float("inf")
+        else:
+            nu = z - Hc @ ekf.mean(idx)
+            d2 = kern.mahalanobis2(nu, ekf.innovation_cov(idx, Hc, Rn))
         ok = d2 <= self._sensor_thr[dof]
         # gate lock-out guard: after `sensor_gate_max_rejections` consecutive rejections the filter, not the
         # sensor, is wrong (e.g. an unmodelled acceleration): accept the measurement to re-converge
@@ -519,9 +579,9 @@ class _Runner:
 
     def process_scan(self, t: float, dets: list[Detection]) -> None:
         ekf, cfg = self.ekf, self.cfg
-        rpy = self.attitude(t)
+        rpy, f = self.attitude_at(t)
         R_ahrs = rotation_from_rpy(*rpy)
-        att_cov = self.attitude_cov_world(rpy)
+        att_cov = self.attitude_cov_world(rpy, f)
         meas = [measurement_from_detection(d, self.m.T_vehicle_scanner, symmetry=self.sym.get(d.label),
                                            unobservable_var_rad2=cfg.unobservable_var_rad2, index=k)
                 for k, d in enumerate(dets)]
@@ -678,7 +738,8 @@ class _Runner:
             metrics["n_objects_mapped"] = len({lm.matched_object for lm in landmarks if lm.matched_object})
         return SlamResult(self.mode, stamps, pos, Pp, np.asarray(H["v"]).reshape(-1, 3),
                           np.asarray(H["Pv"]).reshape(-1, 3, 3), np.asarray(H["b"]), truth, landmarks, self.log,
-                          metrics, self.cfg, np.asarray(H["c"]).reshape(-1, 8) if ekf.dvl_calibration else None)
+                          metrics, self.cfg, np.asarray(H["c"]).reshape(-1, 8) if ekf.dvl_calibration else None,
+                          np.asarray(H["bv"]) if ekf.yaw_bias else None)
 
     def _evaluate_landmark(self, j, lm, pose, cov) -> LandmarkEstimate:
         objs = [o for o in self.m.objects if o.label == lm.label]
