@@ -97,7 +97,8 @@ def confusion_matrix(actual: Any, predicted: Any, labels: Any) -> np.ndarray:
 
 
 def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str | Any = "chi2",
-                  seed: int | np.random.Generator = 0, n_jobs: int = 1) -> EvaluationResult:
+                  seed: int | np.random.Generator = 0, n_jobs: int = 1,
+                  progress: Any = None) -> EvaluationResult:
     """Classify every view of ``db`` with a classifier trained on all the other views.
 
     Parameters
@@ -115,6 +116,8 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
     n_jobs : int
         Processes fitting the folds of a trained classifier in parallel (joblib; -1 = every core). The result
         does not depend on it: every fold's estimator and seed are fixed before any is fitted.
+    progress : callable, optional
+        Called as ``progress(n_done, n_folds)`` after every fitted fold (e.g. to drive a progress bar).
     """
     if not isinstance(db, ViewDatabase):
         raise RecognitionError(f"The 'db' argument of leave_one_out must be a ViewDatabase. Got {type(db).__name__} instead.")
@@ -142,7 +145,13 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         for _ in range(len(y)):  # one fit per fold: inherent to leave-one-out; seeds drawn in fold order
             estimators.append(SvmClassifier(seed=int(rng.integers(2**31 - 1))) if classifier == "svm"
                               else _fresh(classifier))
-        folds = Parallel(n_jobs=n_jobs or 1)(delayed(_fit_predict_fold)(est, X, y, i) for i, est in enumerate(estimators))
+        jobs = Parallel(n_jobs=n_jobs or 1, return_as="generator")(
+            delayed(_fit_predict_fold)(est, X, y, i) for i, est in enumerate(estimators))
+        folds = []
+        for fold in jobs:  # in fold order
+            folds.append(fold)
+            if progress is not None:
+                progress(len(folds), len(estimators))
         predicted = np.array([p for p, _ in folds], dtype=object)
         chosen = [c for _, c in folds if c is not None]
         predicted = predicted.astype(str)
