@@ -7,7 +7,7 @@ import numpy as np
 from .._validation import as_float_array, check_choice
 from ..errors import DescriptorError
 from ._pair_kernels import fpfh_from_spfh, spfh, spfh_symmetric
-from .neighbors import Neighborhoods, find_neighbors
+from .neighbors import Neighborhoods, resolve_neighbors
 
 
 def compute_spfh(
@@ -74,16 +74,8 @@ def compute_fpfh(
     """
     caller = "compute_fpfh"
     pts, nrm = _check(points_xyz_m, normals_xyz, caller)
-    given = sum(x is not None for x in (k, radius_m, neighbors))
-    if given != 1:
-        raise DescriptorError(
-            f"Exactly one of the 'radius_m', 'k' and 'neighbors' arguments of {caller} must be given. "
-            f"Got {given} of them instead."
-        )
-    if neighbors is None:
-        neighbors = find_neighbors(pts, k=k, radius_m=radius_m, workers=workers)
-    else:
-        neighbors.check_for(len(pts), caller)
+    neighbors = resolve_neighbors(pts, k=k, radius_m=radius_m, neighbors=neighbors, workers=workers, caller=caller,
+                                  order="'radius_m', 'k' and 'neighbors'")
     check_choice("nan_normals", nan_normals, ("pcl", "skip"), caller=caller)
     hist = _spfh(pts, nrm, neighbors, nan_normals)
     return fpfh_from_spfh(hist, neighbors.indptr, neighbors.indices, neighbors.sqdist_m2)

@@ -136,6 +136,21 @@ def find_neighbors(
 _MAX_CELLS_PER_AXIS = 2**20
 
 
+def resolve_neighbors(pts: np.ndarray, *, k: int | None, radius_m: float | None, neighbors: "Neighborhoods | None",
+                      workers: int, caller: str, order: str = "'k', 'radius_m' and 'neighbors'") -> "Neighborhoods":
+    """The neighbourhoods a descriptor uses: exactly one of ``k``, ``radius_m`` or precomputed ``neighbors``
+    (checked against ``pts``), else :class:`DescriptorError` naming ``caller``."""
+    given = sum(x is not None for x in (k, radius_m, neighbors))
+    if given != 1:
+        raise DescriptorError(
+            f"Exactly one of the {order} arguments of {caller} must be given. Got {given} of them instead."
+        )
+    if neighbors is None:
+        return find_neighbors(pts, k=k, radius_m=radius_m, workers=workers)
+    neighbors.check_for(len(pts), caller)
+    return neighbors
+
+
 def _grid_radius(pts: np.ndarray, origin: np.ndarray, r: float, cell_m: float) -> Neighborhoods:
     grid, counts = grid_bucket_count(pts, origin, cell_m, r)
     indptr = np.zeros(len(pts) + 1, dtype=np.int64)

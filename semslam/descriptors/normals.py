@@ -9,7 +9,7 @@ import numpy as np
 from .._validation import as_float_array
 from ..errors import DescriptorError
 from ._normals_kernels import normals_from_neighborhoods
-from .neighbors import Neighborhoods, find_neighbors
+from .neighbors import Neighborhoods, resolve_neighbors
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,15 +77,7 @@ def estimate_normals(
     caller = "estimate_normals"
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller, error=DescriptorError)
     vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=caller, error=DescriptorError)
-    given = sum(x is not None for x in (k, radius_m, neighbors))
-    if given != 1:
-        raise DescriptorError(
-            f"Exactly one of the 'k', 'radius_m' and 'neighbors' arguments of {caller} must be given. "
-            f"Got {given} of them instead."
-        )
-    if neighbors is None:
-        neighbors = find_neighbors(pts, k=k, radius_m=radius_m, workers=workers)
-    else:
-        neighbors.check_for(len(pts), caller)
+    neighbors = resolve_neighbors(pts, k=k, radius_m=radius_m, neighbors=neighbors, workers=workers, caller=caller,
+                                  order="'k', 'radius_m' and 'neighbors'")
     normals, curvature = normals_from_neighborhoods(pts, neighbors.indptr, neighbors.indices, vp)
     return NormalsResult(normals, curvature, neighbors.counts)

@@ -172,15 +172,18 @@ def fit_plane_rmsac(
     caller = "fit_plane_rmsac"
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller)
     thr = check_positive("distance_threshold_m", distance_threshold_m, caller=caller)
+    conf, max_it, n_pre, rng = _check_sampling(confidence, max_iterations, n_pretest, seed, caller)
+    return _fit(pts, thr, conf, max_it, n_pre, bool(refine), rng, caller)
+
+
+def _check_sampling(confidence, max_iterations, n_pretest, seed, caller: str):
+    """Validated RMSAC sampling arguments: confidence in (0, 1), iteration cap >= 1, pre-test size >= 0, RNG."""
     conf = check_positive("confidence", confidence, caller=caller)
     if not conf < 1.0:
-        raise InputError(
-            f"The 'confidence' argument of {caller} must be in (0, 1). Got {confidence!r} instead."
-        )
+        raise InputError(f"The 'confidence' argument of {caller} must be in (0, 1). Got {confidence!r} instead.")
     max_it = check_int("max_iterations", max_iterations, caller=caller, minimum=1)
     n_pre = check_int("n_pretest", n_pretest, caller=caller, minimum=0)
-    rng = as_rng(seed, caller=caller)
-    return _fit(pts, thr, conf, max_it, n_pre, bool(refine), rng, caller)
+    return conf, max_it, n_pre, as_rng(seed, caller=caller)
 
 
 def _fit(
@@ -324,14 +327,7 @@ def remove_dominant_planes(
         if min_inliers is None
         else check_int("min_inliers", min_inliers, caller=caller, minimum=3)
     )
-    conf = check_positive("confidence", confidence, caller=caller)
-    if not conf < 1.0:
-        raise InputError(
-            f"The 'confidence' argument of {caller} must be in (0, 1). Got {confidence!r} instead."
-        )
-    max_it = check_int("max_iterations", max_iterations, caller=caller, minimum=1)
-    n_pre = check_int("n_pretest", n_pretest, caller=caller, minimum=0)
-    rng = as_rng(seed, caller=caller)
+    conf, max_it, n_pre, rng = _check_sampling(confidence, max_iterations, n_pretest, seed, caller)
     remaining = np.arange(len(pts), dtype=np.int64)
     planes: list[PlaneModel] = []
     reason = "max_planes reached"
