@@ -14,7 +14,7 @@ about its axis is compared with the closest equivalent truth and carries 1e4 rad
 many of them are flagged unreliable, correct poses flagged, median CPU ms per object.
 
     .venv/bin/python benchmarks/pose_accuracy.py [--seeds 0 1 2] [--altitudes 1.0 1.5] [--models fused view]
-                                                 [--method grid ransac]
+                                                 [--method grid ransac] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -35,7 +35,14 @@ def main() -> None:
     ap.add_argument("--altitudes", type=float, nargs="+", default=[1.0, 1.5])
     ap.add_argument("--models", nargs="+", default=["fused", "view"], choices=["fused", "view"])
     ap.add_argument("--method", nargs="+", default=["grid"], choices=["grid", "ransac"])
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
+                    help="PoseConfig overrides, e.g. --set n_coarse_rotations=0 icp_backend=small_gicp")
     args = ap.parse_args()
+    overrides = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        default = getattr(PoseConfig(), name)
+        overrides[name] = type(default)(value) if not isinstance(default, str) else value
 
     t0 = time.perf_counter()
     clusters = simulated_clusters(args.seeds, altitudes_m=args.altitudes)
@@ -43,7 +50,7 @@ def main() -> None:
           f"({time.perf_counter() - t0:.0f} s to simulate)\n")
     views, classes = builtin_view_clouds(seed=0)
     for method in args.method:
-        cfg = PoseConfig(coarse_method=method)
+        cfg = PoseConfig(coarse_method=method, **overrides)
         for kind in args.models:
             if kind == "fused":
                 models = {lab: prepare_pose_model([v for lb, _, v in views if lb == lab], cfg) for lab in classes}
@@ -59,7 +66,7 @@ def main() -> None:
                              for lab, v, m in per_view if lab == c.label]
                     model = max(cands, key=lambda x: x[0])[1]
                     rows += evaluate([c], {c.label: model}, seed=i)
-            print(summary_table(rows, f"method={method}, model={kind}"))
+            print(summary_table(rows, f"method={method}, model={kind}" + (f", {overrides}" if overrides else "")))
             print()
 
 

@@ -209,3 +209,69 @@ def test_pairwise_rotation_distances_match_symmetry_errors():
         # rotations of T_object_scanner: object orientations are the transposes
         want = np.array([[sym.rotation_error_rad(a.T, b.T) for b in R[::-1]] for a in R])
         np.testing.assert_allclose(D, want, atol=1e-6)
+
+
+# -- coarse-to-fine rotation grid, ICP candidates of the distance field, numba ICP ------------------------
+
+def test_rotation_hierarchy_parents_are_nearest_coarse_rotations():
+    from semslam.registration.search import RotationHierarchy
+
+    fine = so3_grid(512)
+    h = RotationHierarchy.build(fine, 64)
+    assert len(h.coarse) == 64 and h.offsets[-1] == 512
+    np.testing.assert_array_equal(np.sort(h.children), np.arange(512))  # a partition of the fine grid
+    parent = np.empty(512, int)
+    for c in range(64):
+        parent[h.children[h.offsets[c]:h.offsets[c + 1]]] = c
+    d = pairwise_rotation_distances(fine, h.coarse, Symmetry())  # brute force: nearest coarse rotation
+    np.testing.assert_allclose(d[np.arange(512), parent], d.min(axis=1), atol=1e-9)
+    np.testing.assert_array_equal(h.children_of(np.array([3, 1])),
+                                  np.sort(np.concatenate([h.children[h.offsets[c]:h.offsets[c + 1]] for c in (1, 3)])))
+
+
+def test_distance_field_icp_candidates_hold_the_nearest_points():
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(2)
+    model = rng.uniform(-0.05, 0.05, (600, 3))
+    f = DistanceField.build(model, cell_m=0.004, margin_m=0.02, truncation_m=0.02, n_index=8)
+    assert f.index.shape == (*f.offsets.shape[:3], 8)
+    ijk = np.indices(f.offsets.shape[:3]).reshape(3, -1).T
+    centres = f.origin + (ijk + 0.5) * f.cell_m
+    d, j = cKDTree(model).query(centres, k=8)
+    cand = f.index.reshape(-1, 8)
+    near = d[:, 7] <= 0.02  # all 8 within the bound: the candidates are exactly the 8 nearest, nearest first
+    assert near.sum() > 1000
+    np.testing.assert_array_equal(cand[near], j[near])
+    none = d[:, 0] > 0.02 + np.sqrt(3) * 0.004
+    assert (cand[none] == -1).all()
+
+
+@pytest.mark.parametrize("rot_deg, trans_m", [(3.0, 0.004), (8.0, 0.01)])
+def test_field_icp_recovers_a_known_motion_like_small_gicp(rot_deg, trans_m):
+    import small_gicp
+
+    from semslam.registration._icp_kernels import icp_plane_field
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(20000, 3))
+    model = 0.04 * d / np.linalg.norm(d, axis=1, keepdims=True) * [1.0, 0.6, 0.4]  # an ellipsoid's surface
+    cloud = small_gicp.PointCloud(model)
+    tree = small_gicp.KdTree(cloud)
+    small_gicp.estimate_normals(cloud, tree, num_neighbors=15)
+    normals = np.ascontiguousarray(cloud.normals()[:, :3])
+    f = DistanceField.build(model, cell_m=0.0025)
+    T_true = np.eye(4)  # T_target_source
+    T_true[:3, :3] = Rotation.from_rotvec(np.radians(rot_deg) * np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])).as_matrix()
+    T_true[:3, 3] = trans_m * np.array([0.6, 0.0, -0.8])
+    part = model[(model[:, 2] > 0) & (model[:, 0] > -0.02)][::7]  # a partial view, in the target frame
+    src = (part - T_true[:3, 3]) @ T_true[:3, :3]  # the same points in the source frame
+    T, n_it, converged, n_pairs = icp_plane_field(src, np.eye(4), f.params, f.index, model, normals, 0.02, 50,
+                                                  1e-4, 1e-5)
+    assert converged and n_pairs == len(src)
+    ref = small_gicp.align(cloud, small_gicp.PointCloud(src), tree, init_T_target_source=np.eye(4),
+                           registration_type="PLANE_ICP", max_correspondence_distance=0.02, num_threads=1,
+                           max_iterations=50)
+    for M in (T, np.array(ref.T_target_source)):
+        np.testing.assert_allclose(M[:3, 3], T_true[:3, 3], atol=5e-4)
+        assert np.degrees(Rotation.from_matrix(M[:3, :3] @ T_true[:3, :3].T).magnitude()) < 0.5

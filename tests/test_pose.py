@@ -127,3 +127,36 @@ def test_goals_on_simulated_mission_scans(mission_eval):
     wrong = [r for r in rows if not r.success]
     assert sum(not r.reliable for r in wrong) >= len(wrong) / 2
     assert sum(not r.reliable for r in ok) <= 0.4 * len(ok)
+
+
+@pytest.mark.parametrize("label", ["elbow", "reducing_tee"])
+def test_numba_icp_backend_matches_small_gicp(objects, label):
+    """The grid search's ICP in numba (default) gives the pose small_gicp gives, within the noise."""
+    from semslam.registration import PoseConfig
+
+    obj = objects[label]
+    rng = np.random.default_rng(11)
+    T, scan = _scan(obj, rng, n_points=3000)
+    cloud = mesh_model_cloud(obj.mesh, seed=1)
+    poses = []
+    for backend in ("field", "small_gicp"):
+        model = prepare_pose_model(cloud, PoseConfig(icp_backend=backend))
+        est = estimate_object_pose(scan, model, symmetry=obj.symmetry)
+        rot, trans, _ = _errors(obj, est, T)
+        assert np.degrees(rot) < 5.0 and trans < 0.005, (backend, np.degrees(rot), trans)
+        poses.append(est.T_scanner_object.matrix)
+    np.testing.assert_allclose(poses[0][:3, 3], poses[1][:3, 3], atol=0.002)
+
+
+def test_coarse_to_fine_grid_finds_the_exhaustive_grid_pose(objects, models):
+    from semslam.registration import PoseConfig
+
+    obj = objects["ball_valve"]
+    rng = np.random.default_rng(12)
+    T, scan = _scan(obj, rng, n_points=3000)
+    exhaustive = prepare_pose_model(mesh_model_cloud(obj.mesh, seed=1), PoseConfig(n_coarse_rotations=0))
+    assert exhaustive.rotation_hierarchy is None and models["ball_valve"].rotation_hierarchy is not None
+    a = estimate_object_pose(scan, models["ball_valve"], symmetry=obj.symmetry)
+    b = estimate_object_pose(scan, exhaustive, symmetry=obj.symmetry)
+    assert obj.symmetry.rotation_error_rad(a.T_scanner_object.rotation, b.T_scanner_object.rotation) < np.radians(2.0)
+    np.testing.assert_allclose(a.T_scanner_object.translation_m, b.T_scanner_object.translation_m, atol=0.002)

@@ -1,4 +1,6 @@
-"""PCL-compatible point-to-point ICP (SVD/Umeyama steps, PCL's stopping rules), for reproducing PCL.
+"""ICP kernels: PCL-compatible point-to-point ICP (SVD/Umeyama steps, PCL's stopping rules), for reproducing
+PCL, and a numba point-to-plane ICP on a precomputed nearest-point grid (:func:`icp_plane_field`, the pose
+search's refinement: no per-call overhead, no KD-tree).
 
 Don't call this directly: :func:`semslam.registration.align_icp` with ``method="pcl"`` validates first.
 small_gicp (Gauss-Newton) converges to the same minimum but stops elsewhere than PCL, whose
@@ -9,6 +11,7 @@ criteria (section 4 of ``design/pcl-algorithms.md``) end the loop on an incremen
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from ._coarse_kernels import umeyama_batch
@@ -48,3 +51,174 @@ def icp_pcl(src: np.ndarray, tree: cKDTree, T0: np.ndarray, max_corr: float, max
             return T, it, True
         prev_mse = mse
     return T, max_iterations, True
+
+
+@njit(cache=True)
+def _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair):
+    """Correspondence of every source point under ``T`` (row of the target point or -1) in ``pair``; returns
+    the number of pairs."""
+    nx, ny, nz = index.shape[0], index.shape[1], index.shape[2]
+    inv = 1.0 / params[3]
+    n_pairs = 0
+    for i in range(src.shape[0]):
+        pair[i] = -1
+        p0 = T[0, 0] * src[i, 0] + T[0, 1] * src[i, 1] + T[0, 2] * src[i, 2] + T[0, 3]
+        p1 = T[1, 0] * src[i, 0] + T[1, 1] * src[i, 1] + T[1, 2] * src[i, 2] + T[1, 3]
+        p2 = T[2, 0] * src[i, 0] + T[2, 1] * src[i, 1] + T[2, 2] * src[i, 2] + T[2, 3]
+        fi = (p0 - params[0]) * inv
+        fj = (p1 - params[1]) * inv
+        fk = (p2 - params[2]) * inv
+        if fi < 0.0 or fj < 0.0 or fk < 0.0:
+            continue
+        a, b, c = int(fi), int(fj), int(fk)
+        if a >= nx or b >= ny or c >= nz:
+            continue
+        best, m = np.inf, -1
+        for k in range(index.shape[3]):  # nearest of the cell's candidates
+            j = index[a, b, c, k]
+            if j < 0:
+                break
+            d0, d1, d2 = p0 - model_pts[j, 0], p1 - model_pts[j, 1], p2 - model_pts[j, 2]
+            d = d0 * d0 + d1 * d1 + d2 * d2
+            if d < best:
+                best, m = d, j
+        if m < 0 or best > mc2:
+            continue
+        pair[i] = m
+        n_pairs += 1
+    return n_pairs
+
+
+@njit(cache=True)
+def _plane_error(src, T, model_pts, model_nrm, pair):
+    """small_gicp's point-to-plane error of the pairs ``pair`` under ``T``: ``sum 0.5 |n * (q - T s)|^2``
+    (element-wise product with the target normal)."""
+    e = 0.0
+    for i in range(src.shape[0]):
+        m = pair[i]
+        if m < 0:
+            continue
+        for a in range(3):
+            p = T[a, 0] * src[i, 0] + T[a, 1] * src[i, 1] + T[a, 2] * src[i, 2] + T[a, 3]
+            r = model_nrm[m, a] * (model_pts[m, a] - p)
+            e += 0.5 * r * r
+    return e
+
+
+@njit(cache=True)
+def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_iterations, rot_eps, trans_eps):
+    """Point-to-plane ICP with correspondences from a precomputed nearest-point grid.
+
+    ``src`` (N, 3) source points; ``T0`` (4, 4) initial ``T_target_source``; ``params`` the grid's
+    (origin x y z, cell, quantum); ``index`` (nx, ny, nz, K) int32: rows of ``model_pts`` / ``model_nrm``
+    (M, 3) of the K target points nearest to each cell's centre (-1: none). A source point pairs with the
+    nearest of its cell's candidates (its exact nearest neighbour unless that is not among them) when
+    they are within ``max_corr``.
+
+    The optimiser is small_gicp's (``small_gicp.align(registration_type="PLANE_ICP")``, which the pose
+    search was calibrated with): its point-to-plane error is ``sum 0.5 |n * (q - T s)|^2`` with ``*`` the
+    element-wise product (a normal-weighted point-to-point error: it slides less than ``(n . (q - T s))^2``,
+    which matters for the separation of the search's hypotheses), minimised by Levenberg-Marquardt on a right
+    perturbation ``T <- T Exp(delta)``, ``delta = (phi, rho)`` in the source frame, damping 1e-3 divided
+    (multiplied) by 10 after an accepted (rejected) step, a step accepted when it decreases the error of the
+    iteration's pairs; stops when
+    ``|phi| < rot_eps`` and ``|rho| < trans_eps``, or after ``max_iterations``.
+    Returns ``(T, iterations, converged, n_pairs)``.
+    """
+    T = T0.copy()
+    N = src.shape[0]
+    mc2 = max_corr * max_corr
+    converged = False
+    it = 0
+    n_pairs = 0
+    lam = 1e-3
+    pair = np.empty(N, np.int64)
+    H = np.empty((6, 6))
+    g = np.empty(6)
+    J = np.empty(6)
+    A = np.empty((6, 6))
+    for it in range(max_iterations):
+        n_pairs = _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair)
+        H[:] = 0.0
+        g[:] = 0.0
+        e = 0.0
+        for i in range(N):
+            m = pair[i]
+            if m < 0:
+                continue
+            x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
+            for a in range(3):  # one row per axis: e_a = n_a (q_a - (T s)_a)
+                na = model_nrm[m, a]
+                p = T[a, 0] * x0 + T[a, 1] * x1 + T[a, 2] * x2 + T[a, 3]
+                r = na * (model_pts[m, a] - p)
+                # d e_a / d phi = n_a (R [s]x)_a ; d e_a / d rho = -n_a R_a
+                J[0] = na * (T[a, 1] * x2 - T[a, 2] * x1)
+                J[1] = na * (T[a, 2] * x0 - T[a, 0] * x2)
+                J[2] = na * (T[a, 0] * x1 - T[a, 1] * x0)
+                J[3], J[4], J[5] = -na * T[a, 0], -na * T[a, 1], -na * T[a, 2]
+                for u in range(6):
+                    g[u] += J[u] * r
+                    for v in range(u, 6):
+                        H[u, v] += J[u] * J[v]
+                e += 0.5 * r * r
+        for u in range(6):
+            for v in range(u):
+                H[u, v] = H[v, u]
+        success = False
+        delta = np.zeros(6)
+        for _ in range(10):
+            A[:] = H
+            for u in range(6):
+                A[u, u] += lam
+            delta = -np.linalg.solve(A, g)
+            T_new = T @ _exp_se3(delta)
+            if _plane_error(src, T_new, model_pts, model_nrm, pair) < e:
+                T = T_new
+                lam /= 10.0
+                success = True
+                converged = (np.sqrt(delta[0] ** 2 + delta[1] ** 2 + delta[2] ** 2) < rot_eps
+                             and np.sqrt(delta[3] ** 2 + delta[4] ** 2 + delta[5] ** 2) < trans_eps)
+                break
+            lam *= 10.0
+        if not success or converged:
+            break
+    return T, it, converged, n_pairs
+
+
+@njit(cache=True)
+def _exp_se3(delta):
+    """4x4 ``Exp`` of ``delta = (phi, rho)`` (rotation vector, then translation), with the SE(3) V matrix."""
+    w0, w1, w2 = delta[0], delta[1], delta[2]
+    ang = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    T = np.eye(4)
+    T[:3, :3] = _exp_so3(w0, w1, w2, ang)
+    K = np.zeros((3, 3))
+    K[0, 1], K[0, 2], K[1, 0], K[1, 2], K[2, 0], K[2, 1] = -w2, w1, w2, -w0, -w1, w0
+    if ang < 1e-10:
+        V = np.eye(3) + 0.5 * K
+    else:
+        V = np.eye(3) + (1.0 - np.cos(ang)) / ang ** 2 * K + (ang - np.sin(ang)) / ang ** 3 * (K @ K)
+    for a in range(3):
+        T[a, 3] = V[a, 0] * delta[3] + V[a, 1] * delta[4] + V[a, 2] * delta[5]
+    return T
+
+
+@njit(cache=True)
+def _exp_so3(w0, w1, w2, ang):
+    """Rotation matrix of the rotation vector (w0, w1, w2) of norm ``ang`` (Rodrigues)."""
+    R = np.eye(3)
+    if ang < 1e-12:
+        return R
+    k0, k1, k2 = w0 / ang, w1 / ang, w2 / ang
+    s, c = np.sin(ang), np.cos(ang)
+    C = 1.0 - c
+    R[0, 0] = c + k0 * k0 * C
+    R[0, 1] = k0 * k1 * C - k2 * s
+    R[0, 2] = k0 * k2 * C + k1 * s
+    R[1, 0] = k1 * k0 * C + k2 * s
+    R[1, 1] = c + k1 * k1 * C
+    R[1, 2] = k1 * k2 * C - k0 * s
+    R[2, 0] = k2 * k0 * C - k1 * s
+    R[2, 1] = k2 * k1 * C + k0 * s
+    R[2, 2] = c + k2 * k2 * C
+    return R

@@ -10,7 +10,7 @@ stays in the CPU cache (the lookups are random accesses).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True)
@@ -46,7 +46,7 @@ def field_nearest(points, params, nearest):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     """Translation-only alignment of every hypothesis, then its fit cost.
 
@@ -55,54 +55,61 @@ def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     truncation in ``truncations`` one step moves ``t`` by the mean offset to the nearest model points of the
     source points within that truncation. Returns the fit cost (H,) =
     ``mean_i min(d_i, tau)^2 / tau^2`` in [0, 1] (points outside the field count as ``tau``).
+    Hypotheses are independent: they are spread over the cores (same result for any thread count).
     """
     H, N = Rs.shape[0], src.shape[0]
-    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
-    inv = 1.0 / cell_m
     cost = np.empty(H)
-    q = np.empty((N, 3))
-    for h in range(H):
-        R = Rs[h]
-        for n in range(N):
-            for a in range(3):
-                q[n, a] = R[a, 0] * src[n, 0] + R[a, 1] * src[n, 1] + R[a, 2] * src[n, 2]
-        t0, t1, t2 = ts[h, 0], ts[h, 1], ts[h, 2]
-        for it in range(truncations.shape[0]):
-            tr2 = truncations[it] * truncations[it]
-            s0 = s1 = s2 = 0.0
-            cnt = 0
-            for n in range(N):
-                p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
-                ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
-                if ok < 0:
-                    continue
-                d0, d1, d2 = x - p0, y - p1, z - p2
-                if d0 * d0 + d1 * d1 + d2 * d2 <= tr2:
-                    s0 += d0
-                    s1 += d1
-                    s2 += d2
-                    cnt += 1
-            if cnt == 0:
-                break
-            t0 += s0 / cnt
-            t1 += s1 / cnt
-            t2 += s2 / cnt
-        ts[h, 0], ts[h, 1], ts[h, 2] = t0, t1, t2
-        tau2 = tau_m * tau_m
-        c = 0.0
-        for n in range(N):
-            p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
-            ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
-            if ok < 0:
-                c += 1.0
-            else:
-                d2 = (x - p0) ** 2 + (y - p1) ** 2 + (z - p2) ** 2
-                c += min(d2, tau2) / tau2
-        cost[h] = c / N
+    for h in prange(H):
+        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, nearest, truncations, tau_m)
     return cost
 
 
 @njit(cache=True)
+def _align_and_score_one(R, t, src, origin, cell_m, nearest, truncations, tau_m):
+    """:func:`align_and_score` of one hypothesis (``t`` (3,) updated in place)."""
+    N = src.shape[0]
+    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
+    inv = 1.0 / cell_m
+    q = np.empty((N, 3))
+    for n in range(N):
+        for a in range(3):
+            q[n, a] = R[a, 0] * src[n, 0] + R[a, 1] * src[n, 1] + R[a, 2] * src[n, 2]
+    t0, t1, t2 = t[0], t[1], t[2]
+    for it in range(truncations.shape[0]):
+        tr2 = truncations[it] * truncations[it]
+        s0 = s1 = s2 = 0.0
+        cnt = 0
+        for n in range(N):
+            p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
+            ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+            if ok < 0:
+                continue
+            d0, d1, d2 = x - p0, y - p1, z - p2
+            if d0 * d0 + d1 * d1 + d2 * d2 <= tr2:
+                s0 += d0
+                s1 += d1
+                s2 += d2
+                cnt += 1
+        if cnt == 0:
+            break
+        t0 += s0 / cnt
+        t1 += s1 / cnt
+        t2 += s2 / cnt
+    t[0], t[1], t[2] = t0, t1, t2
+    tau2 = tau_m * tau_m
+    c = 0.0
+    for n in range(N):
+        p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
+        ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+        if ok < 0:
+            c += 1.0
+        else:
+            d2 = (x - p0) ** 2 + (y - p1) ** 2 + (z - p2) ** 2
+            c += min(d2, tau2) / tau2
+    return c / N
+
+
+@njit(cache=True, parallel=True)
 def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m):
     """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
 
@@ -116,7 +123,7 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     H, M = Rs.shape[0], model_pts.shape[0]
     nu, nv = range_min.shape[0], range_min.shape[1]
     out = np.empty(H)
-    for h in range(H):
+    for h in prange(H):
         R = Rs[h]
         n_front = 0
         n_bad = 0

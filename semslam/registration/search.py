@@ -9,6 +9,7 @@ orientation the model predicts surface where the scanner saw nothing (or in fron
 * :func:`so3_grid`: super-Fibonacci rotations (Alexa, CVPR 2022), nearly uniform and deterministic.
 * :class:`DistanceField`: per-cell nearest model point on a regular grid (object frame).
 * :class:`RangeImage`: the cluster's smallest observed range per angular cell (scanner frame).
+* :class:`RotationHierarchy`: a coarse grid over the fine one (coarse-to-fine ranking).
 * :func:`search_hypotheses`: every grid orientation scored; returns the best distinct hypotheses.
 """
 
@@ -38,31 +39,68 @@ def so3_grid(n: int) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
+class RotationHierarchy:
+    """A coarse SO(3) grid over a fine one for a coarse-to-fine search: ``coarse`` (C, 3, 3) rotations and,
+    for each coarse rotation ``c``, its children ``children[offsets[c]:offsets[c + 1]]`` = indices of the
+    fine rotations nearer to it than to any other coarse rotation (every fine rotation has one parent)."""
+
+    coarse: np.ndarray
+    children: np.ndarray
+    offsets: np.ndarray
+
+    @classmethod
+    def build(cls, fine: np.ndarray, n_coarse: int) -> "RotationHierarchy":
+        coarse = so3_grid(n_coarse)
+        qf = Rotation.from_matrix(fine).as_quat()
+        qc = Rotation.from_matrix(coarse).as_quat()
+        parent = np.empty(len(fine), dtype=np.int64)
+        for s in range(0, len(fine), 1024):  # |<q_f, q_c>| largest = smallest angle (q and -q are the same)
+            parent[s:s + 1024] = np.argmax(np.abs(qf[s:s + 1024] @ qc.T), axis=1)
+        order = np.argsort(parent, kind="stable")
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(parent, minlength=len(coarse)))])
+        return cls(coarse, order, offsets)
+
+    def children_of(self, coarse_indices: np.ndarray) -> np.ndarray:
+        """Sorted fine-grid indices of the children of ``coarse_indices``."""
+        parts = [self.children[self.offsets[c]:self.offsets[c + 1]] for c in coarse_indices]
+        return np.sort(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
+
+
+@dataclass(frozen=True, eq=False)
 class DistanceField:
     """Nearest model point per grid cell (object frame), compact: ``offsets (nx, ny, nz, 3)`` int8 = nearest
     point minus cell centre in units of ``quantum_m`` (-128: farther than ``truncation_m``). Cell ``cell_m``,
-    grid origin ``origin`` (3,)."""
+    grid origin ``origin`` (3,). ``index (nx, ny, nz, K)`` int32 holds the rows of the ``K`` points nearest to
+    each cell's centre in the points the field was built from (-1: none within ``truncation_m``): the
+    candidates of the ICP's nearest-neighbour search (:func:`._icp_kernels.icp_plane_field`)."""
 
     origin: np.ndarray
     cell_m: float
     offsets: np.ndarray
     truncation_m: float
     quantum_m: float
+    index: np.ndarray | None = None
 
     @classmethod
     def build(cls, points_object: np.ndarray, *, cell_m: float = 0.0025, margin_m: float = 0.03,
-              truncation_m: float = 0.03) -> "DistanceField":
+              truncation_m: float = 0.03, n_index: int = 8) -> "DistanceField":
         quantum = max(truncation_m + cell_m, 1e-6) / 126.0
         lo = points_object.min(axis=0) - margin_m
         hi = points_object.max(axis=0) + margin_m
         dims = np.ceil((hi - lo) / cell_m).astype(int)
         axes = [lo[a] + cell_m * (np.arange(dims[a]) + 0.5) for a in range(3)]
         centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        d, j = cKDTree(points_object).query(centres, k=1, distance_upper_bound=truncation_m)
+        # one query serves both: the nearest point (offsets) and the ICP's candidates (index)
+        k = max(int(n_index), 1)
+        dk, jk = cKDTree(points_object).query(centres, k=k, distance_upper_bound=truncation_m + np.sqrt(3.0) * cell_m,
+                                              workers=-1)
+        dk, jk = dk.reshape(len(centres), k), jk.reshape(len(centres), k)
+        d, j = np.where(dk[:, 0] <= truncation_m, dk[:, 0], np.inf), jk[:, 0]
         off = np.full((len(centres), 3), -128, dtype=np.int8)
         ok = np.isfinite(d)
         off[ok] = np.clip(np.rint((points_object[j[ok]] - centres[ok]) / quantum), -127, 127).astype(np.int8)
-        return cls(lo, float(cell_m), off.reshape(*dims, 3), float(truncation_m), float(quantum))
+        index = np.where(np.isfinite(dk), jk, -1).astype(np.int32).reshape(*dims, k)
+        return cls(lo, float(cell_m), off.reshape(*dims, 3), float(truncation_m), float(quantum), index)
 
     @property
     def params(self) -> np.ndarray:
@@ -154,11 +192,15 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       symmetry: Symmetry, image_cell_m: float, tau_m: float, visibility_weight: float,
                       visibility_tol_m: float, truncations_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006),
                       n_keep: int = 5, n_candidates: int = 512, n_coarse_points: int = 48,
-                      min_separation_rad: float = np.radians(20.0)) -> tuple[list[Hypothesis], RangeImage]:
+                      min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
+                      n_coarse_keep: int = 128) -> tuple[list[Hypothesis], RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of
     ``n_coarse_points`` of the points ranks all orientations; the ``n_candidates`` best are aligned and fitted
     again with all the points and get the visibility term.
+
+    With a ``hierarchy`` over ``rotations``, the first ranking is coarse to fine: the coarse grid is ranked,
+    and only the children of its ``n_coarse_keep`` best orientations are ranked in ``rotations``.
 
     ``points`` (N, 3) is the (downsampled) cluster in the scanner frame. The translation starts with the
     cluster's centroid mapped ``object_radius_m / 2`` from the object's origin towards the scanner and is
@@ -167,14 +209,21 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     c = points.mean(axis=0)
     view = viewpoint - c
     view /= max(np.linalg.norm(view), 1e-12)
-    Rs = np.ascontiguousarray(rotations, dtype=np.float64)
-    ts = np.ascontiguousarray(0.5 * object_radius_m * (Rs @ view) - Rs @ c)
-    # coarse to fine: every orientation with a few points, then the best n_candidates with all of them
     sub = np.ascontiguousarray(points[np.linspace(0, len(points) - 1, min(len(points), n_coarse_points)).astype(int)])
-    K.align_and_score(Rs, ts, sub, field.params, field.cell_m, field.offsets,
-                      np.asarray(truncations_m[:-2], dtype=np.float64), float(tau_m))
-    fit0 = K.align_and_score(Rs, ts, sub, field.params, field.cell_m, field.offsets,
-                             np.zeros(0), float(tau_m))
+    coarse_truncations = np.asarray(truncations_m[:-2], dtype=np.float64)
+
+    def initial_translations(R):
+        return np.ascontiguousarray(0.5 * object_radius_m * (R @ view) - R @ c)
+
+    Rs = np.ascontiguousarray(rotations, dtype=np.float64)
+    if hierarchy is not None and n_coarse_keep < len(hierarchy.coarse):
+        Rc = np.ascontiguousarray(hierarchy.coarse, dtype=np.float64)
+        fitc = K.align_and_score(Rc, initial_translations(Rc), sub, field.params, field.cell_m, field.offsets,
+                                 coarse_truncations, float(tau_m))
+        Rs = np.ascontiguousarray(Rs[hierarchy.children_of(np.argsort(fitc, kind="stable")[:n_coarse_keep])])
+    ts = initial_translations(Rs)
+    # coarse to fine: every orientation with a few points, then the best n_candidates with all of them
+    fit0 = K.align_and_score(Rs, ts, sub, field.params, field.cell_m, field.offsets, coarse_truncations, float(tau_m))
     cand = np.argsort(fit0, kind="stable")[:n_candidates]
     Rs, ts = np.ascontiguousarray(Rs[cand]), np.ascontiguousarray(ts[cand])
     fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets,
