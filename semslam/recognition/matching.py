@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClassifierMixin
+import inspect
 
 from .._validation import as_float_array, as_rng, check_choice, check_int
 from ..errors import InputError, RecognitionError
@@ -25,6 +25,38 @@ from . import _chi2_kernels
 from .rejection import UNKNOWN_LABEL, RejectionThresholds, calibrate_rejection
 
 __all__ = ["Chi2NearestNeighbor", "SvmClassifier", "chi2_distances"]
+
+
+class _Estimator:
+    """The scikit-learn estimator protocol (``get_params``/``set_params``, accuracy ``score``), written out so that
+    importing the recognition stage does not import scikit-learn (1-2 s of start-up); ``sklearn.base.clone``,
+    ``GridSearchCV`` and friends work with it as with any estimator."""
+
+    _estimator_type = "classifier"
+
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return sorted(p.name for p in sig.parameters.values() if p.name != "self" and p.kind != p.VAR_KEYWORD)
+
+    def get_params(self, deep: bool = True) -> dict:
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def set_params(self, **params: Any):
+        valid = set(self._param_names())
+        for name, value in params.items():
+            if name not in valid:
+                raise InputError(f"{type(self).__name__} has no parameter {name!r}. Valid ones: {sorted(valid)}.")
+            setattr(self, name, value)
+        return self
+
+    def score(self, X: Any, y: Any) -> float:
+        """Mean accuracy of ``predict(X)`` against ``y``."""
+        return float(np.mean(np.asarray(self.predict(X)).astype(str) == np.asarray(y).astype(str)))
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"{type(self).__name__}({args})"
 
 
 def _as_histograms(name: str, X: Any, caller: str, n_features: int | None = None) -> np.ndarray:
@@ -69,7 +101,7 @@ def chi2_distances(X: Any, Y: Any) -> np.ndarray:
     return _chi2_kernels.chi2_distance_matrix(Xa, Ya)
 
 
-class Chi2NearestNeighbor(ClassifierMixin, BaseEstimator):
+class Chi2NearestNeighbor(_Estimator):
     """Nearest-neighbour classifier in chi-square distance, with optional unknown-object rejection.
 
     Parameters
@@ -172,7 +204,7 @@ def _vote(row: np.ndarray) -> str:
     return next(lab for lab in row if lab in best)
 
 
-class SvmClassifier(ClassifierMixin, BaseEstimator):
+class SvmClassifier(_Estimator):
     """RBF SVM with the grid search of Hsu, Chang & Lin (2003).
 
     Features are scaled to [0, 1] per bin (min-max on the training set, applied unchanged to queries).
