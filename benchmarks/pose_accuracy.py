@@ -2,18 +2,22 @@
 
 Clusters = the ground-truth instance points of each fitting in each scan of one-loop missions (voxel
 5 mm, as the pipeline), truth at the cluster's median line stamp (see semslam/registration/_pose_eval.py).
-Models from the Kinect-like view database inputs ``builtin_view_clouds(seed=0)``:
+Models:
 
-* ``fused``: the class's 8 views fused in the object frame;
-* ``view``: the single matched view (oracle match: the view whose camera direction, in the object frame,
-  is closest to the scanner's; recognition picks it by descriptor in the pipeline).
+* ``pipeline``: what ``ScanRecognizer`` aligns to with the built-in database (``builtin_database(seed=0)``):
+  its pose-model views (8 per class, :data:`~semslam.simulation.kinect.POSE_MODEL_KINECT`: 60 deg, 0.7 m) fused;
+* ``survey``: the built-in database's recognition views (8 per class, SURVEY_KINECT: 75 deg, 1.5 m) fused
+  (the pipeline's model before the database stored pose-model views);
+* ``fused``: the 8 views of ``builtin_view_clouds(seed=0)`` (default KinectConfig: 45 deg, 0.7 m) fused;
+* ``view``: the single matched view of those (oracle match: the view whose camera direction, in the
+  object frame, is closest to the scanner's; recognition picks it by descriptor in the pipeline).
 
 Per class and overall: n, median rotation error (modulo symmetry) and translation error, success rate
 (< 10 deg and < 1 cm), mean / median NEES of the successful poses (6-dof; for the socket the rotation
 about its axis is compared with the closest equivalent truth and carries 1e4 rad^2), wrong poses, how
 many of them are flagged unreliable, correct poses flagged, median CPU ms per object.
 
-    .venv/bin/python benchmarks/pose_accuracy.py [--seeds 0 1 2] [--altitudes 1.0 1.5] [--models fused view]
+    .venv/bin/python benchmarks/pose_accuracy.py [--seeds 0 1 2] [--altitudes 1.0 1.5] [--models pipeline survey fused view]
                                                  [--method grid ransac] [--set NAME=VALUE ...]
 """
 
@@ -26,6 +30,7 @@ import numpy as np
 
 
 def main() -> None:
+    from semslam.recognition.builtin import builtin_database
     from semslam.registration import PoseConfig, prepare_pose_model
     from semslam.registration._pose_eval import evaluate, simulated_clusters, summary_table
     from semslam.simulation import builtin_view_clouds
@@ -33,7 +38,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--altitudes", type=float, nargs="+", default=[1.0, 1.5])
-    ap.add_argument("--models", nargs="+", default=["fused", "view"], choices=["fused", "view"])
+    ap.add_argument("--models", nargs="+", default=["pipeline", "survey", "view"],
+                    choices=["pipeline", "survey", "fused", "view"])
     ap.add_argument("--method", nargs="+", default=["grid"], choices=["grid", "ransac"])
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
                     help="PoseConfig overrides, e.g. --set n_coarse_rotations=0 icp_backend=small_gicp")
@@ -52,7 +58,13 @@ def main() -> None:
     for method in args.method:
         cfg = PoseConfig(coarse_method=method, **overrides)
         for kind in args.models:
-            if kind == "fused":
+            if kind in ("pipeline", "survey"):
+                db = builtin_database(seed=0)
+                models = {lab: prepare_pose_model(db.pose_views(lab) if kind == "pipeline" else
+                                                  [db.view_cloud(int(i)) for i in db.views_of(lab)], cfg)
+                          for lab in db.classes}
+                rows = evaluate(clusters, models)
+            elif kind == "fused":
                 models = {lab: prepare_pose_model([v for lb, _, v in views if lb == lab], cfg) for lab in classes}
                 rows = evaluate(clusters, models)
             else:

@@ -84,8 +84,9 @@ class PipelineConfig:
     border_margin_rad : float
         Default 0.5 degree (~3 laser lines of the default scanner).
     pose_model : {"fused", "view"}
-        Align to all views of the class fused in its canonical frame (default), or to the matched view only
-        (the papers).
+        Align to the class's pose-model views fused in its canonical frame (default;
+        :meth:`~semslam.recognition.ViewDatabase.pose_views`: the database's pose-model views when it stores
+        some, as the built-in one does, else its recognition views), or to the matched view only (the papers).
     pose : PoseConfig
         Coarse alignment, ICP, covariance and reliability thresholds.
     estimate_pose : bool
@@ -227,8 +228,7 @@ class ScanRecognizer:
         if self.config.pose_model == "fused":
             key: Any = label
             if key not in self._pose_models:
-                views = [self.db.view_cloud(int(i)) for i in self.db.views_of(label)]
-                self._pose_models[key] = prepare_pose_model(views, self.config.pose)
+                self._pose_models[key] = prepare_pose_model(self.db.pose_views(label), self.config.pose)
         else:
             key = int(view_index)
             if key not in self._pose_models:

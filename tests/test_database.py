@@ -132,7 +132,8 @@ def test_save_load_round_trip_is_exact(small_db, tmp_path):
         meta = json.loads(np.load(z.open("meta.npy"), allow_pickle=False)[()])
     assert meta["format"] == "semslam-view-database" and meta["version"] == FORMAT_VERSION
     assert set(meta["checksums"]) == {"labels", "view_ids", "point_offsets", "points_xyz_m",
-                                      "viewpoints_xyz_m", "esf", "vfh"}
+                                      "viewpoints_xyz_m", "esf", "vfh", "model_labels", "model_point_offsets",
+                                      "model_points_xyz_m", "model_viewpoints_xyz_m"}
 
 
 def _rewrite(path, mutate):
@@ -264,3 +265,76 @@ def test_build_with_real_descriptors(tmp_path):
     loaded = load_database(save_database(db, tmp_path / "real.npz"))
     np.testing.assert_array_equal(loaded.esf, db.esf)
     np.testing.assert_array_equal(loaded.vfh, db.vfh)
+
+
+@pytest.fixture
+def model_db(standin):
+    """Recognition views of three shapes plus pose-model views for two of them (the sphere has none)."""
+    views, classes = synthetic_shape_views(2, n_points=120, seed=1)
+    models, _ = synthetic_shape_views(3, n_points=90, seed=2)
+    models = [m for m in models if m[0] != "sphere"]
+    return build_database(views, classes, seed=3, voxel_leaf_m=None, model_views=models), views, models
+
+
+def test_pose_model_views_round_trip_and_fallback(model_db, tmp_path):
+    db, _, models = model_db
+    assert FORMAT_VERSION == 2 and len(db.model_labels) == 6
+    loaded = load_database(save_database(db, tmp_path / "db.npz"))
+    for d in (db, loaded):
+        box = d.pose_views("box")
+        expected = [c for lab, _, c in models if lab == "box"]
+        assert len(box) == 3
+        for got, exp in zip(box, expected):
+            np.testing.assert_allclose(got.points_xyz_m, exp.points_xyz_m, atol=1e-6)  # float32 storage
+            np.testing.assert_allclose(got.viewpoint_xyz_m, exp.viewpoint_xyz_m)
+            assert got.frame_id == "object"
+        # no pose-model views: the recognition views
+        sphere = d.pose_views("sphere")
+        assert len(sphere) == 2
+        np.testing.assert_array_equal(sphere[1].points_xyz_m, d.view_points(int(d.views_of("sphere")[1])))
+    for name in ("model_labels", "model_point_offsets", "model_points_xyz_m", "model_viewpoints_xyz_m"):
+        np.testing.assert_array_equal(getattr(db, name), getattr(loaded, name), err_msg=name)
+    s = db.summary()
+    assert s["n_model_views"] == 6 and s["classes"]["cylinder"]["n_model_views"] == 3
+    assert s["classes"]["sphere"]["n_model_views"] == 0
+    with pytest.raises(DatabaseError, match="'nope' is not in the database"):
+        db.pose_views("nope")
+    # subset keeps the model views of the kept classes only
+    sub = db.subset(db.views_of("cylinder"))
+    assert sub.classes == ("cylinder",) and set(sub.model_labels.tolist()) == {"cylinder"}
+    np.testing.assert_array_equal(sub.pose_views("cylinder")[2].points_xyz_m, db.pose_views("cylinder")[2].points_xyz_m)
+
+
+def test_version_1_files_are_still_read(small_db, tmp_path):
+    db = small_db[0]
+    old = save_database(db, tmp_path / "v1.npz")
+
+    def to_v1(meta, arrays):
+        for name in ("model_labels", "model_point_offsets", "model_points_xyz_m", "model_viewpoints_xyz_m"):
+            del arrays[name], meta["checksums"][name]
+        meta["version"] = 1
+
+    _rewrite(old, to_v1)
+    loaded = load_database(old)
+    assert len(loaded.model_labels) == 0 and loaded.model_point_offsets.tolist() == [0]
+    np.testing.assert_array_equal(loaded.esf, db.esf)
+    views = loaded.pose_views("box")
+    assert len(views) == 4
+    np.testing.assert_array_equal(views[0].points_xyz_m, db.view_points(int(db.views_of("box")[0])))
+    # a version-2 file without its model arrays is incomplete
+    broken = save_database(db, tmp_path / "v2.npz")
+    _rewrite(broken, lambda meta, arrays: arrays.pop("model_labels"))
+    with pytest.raises(DatabaseError, match="v2.npz' is missing the arrays model_labels"):
+        load_database(broken)
+
+
+def test_build_rejects_bad_model_views(standin):
+    views, classes = synthetic_shape_views(1, n_points=80, seed=1)
+    with pytest.raises(InputError, match="Model view 0 .* class 'torus'"):
+        build_database(views, classes, model_views=[("torus", "m0", views[0][2])])
+    with pytest.raises(InputError, match="model view \\('box', 'm'\\) appears twice"):
+        build_database(views, classes, model_views=[("box", "m", views[0][2])] * 2)
+    with pytest.raises(InputError, match="at least 3 points"):
+        build_database(views, classes, model_views=[("box", "m", PointCloud(np.zeros((2, 3))))])
+    with pytest.raises(InputError, match="'model_views' .* must be \\(label, view_id, PointCloud\\)"):
+        build_database(views, classes, model_views=[("box", "m")])

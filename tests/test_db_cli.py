@@ -32,11 +32,12 @@ def test_db_build_info_evaluate(views_dir, tmp_path, capsys):
 
     assert main(["db", "info", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "version 1, 12 views" in text and "| box | 4 | none |" in text
+    assert "version 2, 12 views" in text and "| box | 4 | (views) | none |" in text
     assert main(["--json", "db", "info", str(out)]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["classes"]["cylinder"]["symmetry"]["kind"] == "none"  # no classes.json: symmetry none
-    assert info["classes"]["sphere"]["n_views"] == 4 and info["version"] == 1
+    assert info["classes"]["sphere"]["n_views"] == 4 and info["version"] == 2
+    assert info["n_model_views"] == 0 and info["classes"]["sphere"]["n_model_views"] == 0
 
     assert main(["evaluate", str(out), "--descriptor", "esf", "--classifier", "chi2", "--json"]) == 0
     ev = json.loads(capsys.readouterr().out)
@@ -65,8 +66,8 @@ def test_db_cli_errors(tmp_path, capsys):
 
 def test_db_build_builtin(tmp_path, capsys):
     out = tmp_path / "builtin.npz"
-    assert main(["db", "build", "--builtin", "--n-views", "2", "--esf-samples", "5000", "--normal-radius", "0.006",
-                 "--out", str(out), "--json"]) == 0
+    assert main(["db", "build", "--builtin", "--n-views", "2", "--model-views", "3", "--esf-samples", "5000",
+                 "--normal-radius", "0.006", "--out", str(out), "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
     assert payload["source"] == "builtin" and payload["n_views"] == 8
     db = load_database(out)
@@ -84,3 +85,14 @@ def test_db_build_builtin(tmp_path, capsys):
         # seen from 75 degrees of elevation, 1.5 m away (the survey geometry)
         vp = db.viewpoints_xyz_m[i]
         assert 1.4 < np.linalg.norm(vp) < 1.6
+    # pose-model views: 3 per class at 60 degrees, 0.7 m, object frame
+    assert payload["n_model_views"] == 12 and payload["classes"]["elbow"]["n_model_views"] == 3
+    for label in db.classes:
+        models = db.pose_views(label)
+        assert len(models) == 3
+        for m in models:
+            assert 0.6 < np.linalg.norm(m.viewpoint_xyz_m) < 0.8
+            half = db.class_info(label).size_xyz_m / 2
+            assert np.quantile(np.max(np.abs(m.points_xyz_m) - half, axis=1), 0.99) <= 0.005
+    assert main(["db", "build", "--builtin", "--n-views", "1", "--model-views", "-1", "--out", str(out)]) == 1
+    assert "'--model-views' option must be >= 0" in capsys.readouterr().err

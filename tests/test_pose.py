@@ -101,13 +101,15 @@ def test_too_small_cluster_raises(models):
 
 @pytest.fixture(scope="module")
 def mission_eval():
-    """One-loop missions at 1 m altitude (seeds 0, 1): ground-truth clusters, fused-view models."""
+    """One-loop missions at 1 m altitude (seeds 0, 1): ground-truth clusters, aligned to the models the
+    pipeline uses (ScanRecognizer on the built-in database: its pose-model views, fused)."""
+    from semslam.pipeline import ScanRecognizer
+    from semslam.recognition.builtin import builtin_database
     from semslam.registration._pose_eval import evaluate, simulated_clusters
-    from semslam.simulation import builtin_view_clouds
 
     clusters = simulated_clusters((0, 1), altitudes_m=(1.0,))
-    views, classes = builtin_view_clouds(seed=0)
-    models = {lab: prepare_pose_model([v for lb, _, v in views if lb == lab]) for lab in classes}
+    recognizer = ScanRecognizer(builtin_database(seed=0, cache=False))
+    models = {lab: recognizer.pose_model(lab, int(recognizer.db.views_of(lab)[0])) for lab in recognizer.db.classes}
     return clusters, evaluate(clusters, models)
 
 
@@ -115,21 +117,22 @@ def test_goals_on_simulated_mission_scans(mission_eval):
     clusters, rows = mission_eval
     assert len(rows) >= 20 and {r.label for r in rows} == {"ball_valve", "elbow", "reducing_socket", "reducing_tee"}
     ok = [r for r in rows if r.success]
-    # NOTE: the goals (3 deg, 95 %, NEES 4.5-7.5) were met on the benchmark's 143 clusters earlier in the
-    # session (2.49 deg, 93.7 %, NEES 6.05); concurrent changes to the simulator / normals then degraded this
-    # subset to 5.8 deg / 81 % (see the report). These bounds are the current state, not the goal.
-    assert np.degrees(np.median([r.rot_rad for r in rows])) <= 8.0
+    # issue-4 goals: median rotation <= 3 deg, translation <= 5 mm, success >= 95 %, mean NEES in [4.5, 7.5].
+    # On this 31-cluster subset the pipeline's models (60 deg / 0.7 m pose-model views) give 2.23 deg, 2.0 mm,
+    # 93.5 % (29 / 31: two elbow flips), NEES 6.4; on the benchmark's 143 clusters 2.12 deg, 95.1 %, NEES 6.3
+    # (benchmarks/pose_accuracy.py). The survey views the pipeline fused before gave 4.97 deg, 80.6 %, NEES 10.4.
+    assert np.degrees(np.median([r.rot_rad for r in rows])) <= 3.0
     assert np.median([r.trans_m for r in rows]) <= 0.005
-    assert len(ok) / len(rows) >= 0.75
+    assert len(ok) / len(rows) >= 0.9  # goal 0.95: met on the 143 clusters, not on this subset
     nees = np.array([r.nees for r in ok])
-    assert 3.0 <= nees.mean() <= 20.0, nees
-    # few correct poses are flagged unreliable
-    assert sum(not r.reliable for r in ok) <= 0.4 * len(ok)
+    assert 4.5 <= nees.mean() <= 7.5, nees
+    # few correct poses are flagged unreliable (6 / 29 here, 9 / 136 on the benchmark's clusters)
+    assert sum(not r.reliable for r in ok) <= 0.25 * len(ok)
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (issue 4): on this seeded subset the two wrong poses are elbow "
-                                        "flips whose score margin and visibility pass the reliability thresholds")
 def test_wrong_poses_are_flagged(mission_eval):
+    # one of the two elbow flips is flagged here; over seeds 0-5 at 1 and 1.5 m, 4 of the 13 wrong poses are
+    # (a known gap, issue 4: the other flips' score margin and visibility pass the reliability thresholds)
     _, rows = mission_eval
     wrong = [r for r in rows if not r.success]
     assert wrong and sum(not r.reliable for r in wrong) >= len(wrong) / 2

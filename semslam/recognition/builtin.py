@@ -1,8 +1,10 @@
 """The built-in view database (the simulator's four fittings seen by its Kinect-like camera in the survey
-geometry, :data:`~semslam.simulation.kinect.SURVEY_KINECT`), built once and cached on disk.
+geometry, :data:`~semslam.simulation.kinect.SURVEY_KINECT`, for recognition, and closer and lower,
+:data:`~semslam.simulation.kinect.POSE_MODEL_KINECT`, as the classes' pose-model views), built once and
+cached on disk.
 
 The cache file is keyed by everything that changes its content: the database format version, the
-semslam version, the Kinect settings, the number of views, the seed and the descriptor parameters.
+semslam version, the Kinect settings (both), the numbers of views, the seed and the descriptor parameters.
 It lives in ``$SEMSLAM_CACHE_DIR`` or ``~/.cache/semslam`` and is written atomically; a corrupted or
 unreadable cache file is rebuilt.
 """
@@ -35,7 +37,8 @@ def cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "semslam"
 
 
-def builtin_database(*, seed: int = 0, n_views: int = 8, cache: bool = True, **kwargs: Any) -> ViewDatabase:
+def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8, cache: bool = True,
+                     **kwargs: Any) -> ViewDatabase:
     """The built-in database, from the cache when an identical one was built before.
 
     Parameters
@@ -43,7 +46,10 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, cache: bool = True, **k
     seed : int
         Seeds the simulated views and ESF.
     n_views : int
-        Views per object (azimuths every 360 / n_views degrees).
+        Recognition views per object (azimuths every 360 / n_views degrees), survey geometry.
+    n_model_views : int
+        Pose-model views per object at :data:`~semslam.simulation.kinect.POSE_MODEL_KINECT` (0: none, pose
+        estimation then fuses the recognition views).
     cache : bool
         Read and write the cache (False: always build, write nothing).
     **kwargs
@@ -51,9 +57,10 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, cache: bool = True, **k
         ``esf_n_samples``, ``voxel_leaf_m``).
     """
     from .. import __version__
-    from ..simulation.kinect import SURVEY_KINECT, builtin_view_clouds
+    from ..simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT, builtin_view_clouds
 
     params = {"format_version": FORMAT_VERSION, "semslam": __version__, "kinect": SURVEY_KINECT.to_dict(),
+              "model_kinect": POSE_MODEL_KINECT.to_dict(), "n_model_views": int(n_model_views),
               "n_views": int(n_views), "seed": int(seed), "normal_radius_m": DEFAULT_NORMAL_RADIUS_M,
               "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None, **kwargs}
     key = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
@@ -64,7 +71,10 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, cache: bool = True, **k
         except DatabaseError:
             pass  # corrupted or stale: rebuild below
     views, classes = builtin_view_clouds(seed=seed, n_views=n_views, config=SURVEY_KINECT)
-    db = build_database(views, classes, seed=seed, **kwargs)
+    model_views = None
+    if n_model_views:
+        model_views, _ = builtin_view_clouds(seed=seed, n_views=n_model_views, config=POSE_MODEL_KINECT)
+    db = build_database(views, classes, seed=seed, model_views=model_views, **kwargs)
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,13 @@ File format (``FORMAT_NAME`` version ``FORMAT_VERSION``): an uncompressed ``.npz
 * ``point_offsets``: (V+1,) int64, view ``i`` owns rows ``point_offsets[i]:point_offsets[i+1]`` of ``points_xyz_m``;
 * ``points_xyz_m``: (P, 3) float32, all views' points in their object frame, metres;
 * ``viewpoints_xyz_m``: (V, 3) float64, sensor origin of every view, object frame, metres;
-* ``esf``: (V, 640) float32 and ``vfh``: (V, 308) float32 (VFH variant in ``meta``).
+* ``esf``: (V, 640) float32 and ``vfh``: (V, 308) float32 (VFH variant in ``meta``);
+* (version 2) the POSE-MODEL views, optional per class, that pose estimation fuses instead of the
+  recognition views (e.g. closer, less noisy views that see more of the sides; no descriptors):
+  ``model_labels`` (M,) str, ``model_point_offsets`` (M+1,) int64, ``model_points_xyz_m`` (Q, 3) float32
+  and ``model_viewpoints_xyz_m`` (M, 3) float64, laid out like the views (M may be 0).
+
+Version-1 files (no pose-model views) are still read: their classes' pose models are their views.
 
 The checksums are CRC-32 of every array's bytes (on top of the zip's own CRC of every member). Points
 are float32 (0.1 micrometre resolution at 1 m) and descriptors float32 (PCL's signatures are float32):
@@ -38,11 +44,14 @@ from ..errors import DatabaseError, InputError, SemslamError
 from ..symmetry import Symmetry
 
 FORMAT_NAME = "semslam-view-database"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Older format versions :func:`load_database` still reads.
+READABLE_VERSIONS = (1, 2)
 ESF_BINS = 640
 VFH_BINS = 308
 DESCRIPTORS = ("esf", "vfh", "esf+vfh")
 _ARRAYS = ("labels", "view_ids", "point_offsets", "points_xyz_m", "viewpoints_xyz_m", "esf", "vfh")
+_MODEL_ARRAYS = ("model_labels", "model_point_offsets", "model_points_xyz_m", "model_viewpoints_xyz_m")
 POINT_FILE_SUFFIXES = (".pcd", ".ply", ".npy")
 #: Voxel grid applied to views and queries before their descriptors (the segmentation's default grid).
 DEFAULT_VOXEL_LEAF_M = 0.005
@@ -124,6 +133,13 @@ class ViewDatabase:
     params : dict
         How the descriptors were computed (``vfh_variant``, ``normal_radius_m``, ``esf_n_samples``,
         ``voxel_leaf_m`` -- absent or None in databases built without a voxel grid --, ``seed``).
+    model_labels : ndarray of str, shape (M,)
+        Class of every pose-model view (M may be 0; see :meth:`pose_views`).
+    model_point_offsets : ndarray of int64, shape (M + 1,)
+    model_points_xyz_m : ndarray of float32, shape (Q, 3)
+        All pose-model views' points, object frame.
+    model_viewpoints_xyz_m : ndarray of float64, shape (M, 3)
+        Sensor origin of every pose-model view, object frame.
     """
 
     labels: np.ndarray
@@ -135,11 +151,15 @@ class ViewDatabase:
     vfh: np.ndarray
     class_infos: Mapping[str, ClassInfo]
     params: Mapping[str, Any] = field(default_factory=dict)
+    model_labels: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U1"))
+    model_point_offsets: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int64))
+    model_points_xyz_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    model_viewpoints_xyz_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "class_infos", _class_infos(self.class_infos, "ViewDatabase", allow_empty=True))
         _check_consistency(self, "ViewDatabase", InputError)
-        for name in _ARRAYS:
+        for name in _ARRAYS + _MODEL_ARRAYS:
             getattr(self, name).setflags(write=False)
         object.__setattr__(self, "params", dict(self.params))
 
@@ -189,6 +209,20 @@ class ViewDatabase:
         i = self._check_index(i)
         return PointCloud(self.view_points(i), viewpoint_xyz_m=self.viewpoints_xyz_m[i], frame_id="object")
 
+    def pose_views(self, label: str) -> list[PointCloud]:
+        """The views pose estimation fuses for class ``label``, object frame, with their viewpoints.
+
+        The class's pose-model views when the database stores some (format version 2), else its
+        recognition views.
+        """
+        self.class_info(label)
+        idx = np.flatnonzero(self.model_labels == label)
+        if idx.size == 0:
+            return [self.view_cloud(int(i)) for i in self.views_of(label)]
+        off = self.model_point_offsets
+        return [PointCloud(self.model_points_xyz_m[off[i]:off[i + 1]].astype(np.float64),
+                           viewpoint_xyz_m=self.model_viewpoints_xyz_m[i], frame_id="object") for i in idx]
+
     def features(self, descriptor: str) -> np.ndarray:
         """Descriptor matrix of every view, float64.
 
@@ -221,10 +255,16 @@ class ViewDatabase:
         rows = np.concatenate([np.arange(self.point_offsets[i], self.point_offsets[i + 1]) for i in idx]) \
             if idx.size else np.zeros(0, np.int64)
         kept = set(self.labels[idx].tolist())
+        midx = np.flatnonzero(np.isin(self.model_labels, sorted(kept)))
+        moff = self.model_point_offsets
+        mcounts = np.diff(moff)[midx]
+        mrows = np.concatenate([np.arange(moff[i], moff[i + 1]) for i in midx]) if midx.size else np.zeros(0, np.int64)
         return ViewDatabase(self.labels[idx].copy(), self.view_ids[idx].copy(), offsets,
                             self.points_xyz_m[rows].copy(), self.viewpoints_xyz_m[idx].copy(),
                             self.esf[idx].copy(), self.vfh[idx].copy(),
-                            {k: v for k, v in self.class_infos.items() if k in kept}, self.params)
+                            {k: v for k, v in self.class_infos.items() if k in kept}, self.params,
+                            self.model_labels[midx].copy(), np.concatenate([[0], np.cumsum(mcounts)]).astype(np.int64),
+                            self.model_points_xyz_m[mrows].copy(), self.model_viewpoints_xyz_m[midx].copy())
 
     def summary(self) -> dict:
         """A JSON-friendly description: classes, views per class, symmetry, size, descriptor settings."""
@@ -232,7 +272,9 @@ class ViewDatabase:
         return {
             "format": FORMAT_NAME, "version": FORMAT_VERSION, "n_views": self.n_views,
             "n_points": len(self.points_xyz_m),
-            "classes": {c: {"n_views": counts[c], **self.class_infos[c].to_dict()} for c in self.classes},
+            "n_model_views": len(self.model_labels),
+            "classes": {c: {"n_views": counts[c], "n_model_views": int(np.count_nonzero(self.model_labels == c)),
+                            **self.class_infos[c].to_dict()} for c in self.classes},
             "descriptors": {"esf": {"bins": ESF_BINS, "n_samples": self.params.get("esf_n_samples")},
                             "vfh": {"bins": VFH_BINS, "variant": self.vfh_variant,
                                     "normal_radius_m": self.params.get("normal_radius_m")}},
@@ -332,7 +374,8 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
 def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mapping[str, Mapping[str, Any]], *,
                    vfh_variant: str | None = None, normal_radius_m: float = DEFAULT_NORMAL_RADIUS_M,
                    esf_n_samples: int = 20000, voxel_leaf_m: float | None = DEFAULT_VOXEL_LEAF_M,
-                   seed: int | np.random.Generator = 0, progress: bool = False) -> ViewDatabase:
+                   seed: int | np.random.Generator = 0, progress: bool = False,
+                   model_views: Sequence[tuple[str, str, PointCloud]] | None = None) -> ViewDatabase:
     """Compute the descriptors of partial views and gather them in a :class:`ViewDatabase`.
 
     Parameters
@@ -356,6 +399,10 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         Every view's ESF gets its own seed drawn from it: the database is reproducible.
     progress : bool
         Show a tqdm progress bar.
+    model_views : sequence of (label, view_id, PointCloud), optional
+        Pose-model views (object frame, with viewpoints), stored without descriptors: pose estimation
+        fuses them instead of the recognition views of their class (:meth:`ViewDatabase.pose_views`).
+        Classes without any keep their recognition views as pose model.
     """
     caller = "build_database"
     radius = check_positive("normal_radius_m", normal_radius_m, caller=caller)
@@ -383,6 +430,7 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     unused = set(class_infos) - {lab for lab, _ in seen}
     if unused:
         raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
+    models = _check_model_views(model_views, class_infos, caller)
     variant = vfh_variant if vfh_variant is not None else _vfh_default_variant()
     view_seeds = rng.integers(0, 2**31 - 1, size=len(views))
     iterator: Iterable = enumerate(views)
@@ -409,7 +457,35 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         points_xyz_m=np.concatenate([v[2].points_xyz_m for v in views]).astype(np.float32),
         viewpoints_xyz_m=np.array([v[2].viewpoint_xyz_m for v in views], dtype=np.float64),
         esf=esf, vfh=vfh, class_infos=class_infos, params=params,
+        model_labels=np.array([m[0] for m in models], dtype=str) if models else np.zeros(0, "<U1"),
+        model_point_offsets=np.concatenate([[0], np.cumsum([m[2].n_points for m in models])]).astype(np.int64),
+        model_points_xyz_m=(np.concatenate([m[2].points_xyz_m for m in models]) if models
+                            else np.zeros((0, 3))).astype(np.float32),
+        model_viewpoints_xyz_m=np.array([m[2].viewpoint_xyz_m for m in models], dtype=np.float64).reshape(-1, 3),
     )
+
+
+def _check_model_views(model_views: Any, class_infos: Mapping[str, ClassInfo], caller: str) -> list:
+    """``model_views`` as a list of (label, view_id, PointCloud), checked (None: empty)."""
+    if model_views is None:
+        return []
+    out, seen = [], set()
+    for k, item in enumerate(model_views):
+        if not (isinstance(item, tuple) and len(item) == 3 and isinstance(item[2], PointCloud)):
+            raise InputError(f"Every item of 'model_views' of {caller} must be (label, view_id, PointCloud). "
+                             f"Item {k} is {type(item).__name__} instead.")
+        label, view_id, cloud = str(item[0]), str(item[1]), item[2]
+        if label not in class_infos:
+            raise InputError(f"Model view {k} of {caller} has class {label!r}, which 'classes' does not describe. "
+                             f"Known: {', '.join(sorted(class_infos))}.")
+        if (label, view_id) in seen:
+            raise InputError(f"The model view ({label!r}, {view_id!r}) appears twice in the 'model_views' of {caller}.")
+        if cloud.n_points < 3:
+            raise InputError(f"Model view ({label!r}, {view_id!r}) of {caller} must have at least 3 points. "
+                             f"Got {cloud.n_points}.")
+        seen.add((label, view_id))
+        out.append((label, view_id, cloud))
+    return out
 
 
 def _class_infos(classes: Mapping[str, Any], caller: str, allow_empty: bool = False) -> dict[str, ClassInfo]:
@@ -494,7 +570,7 @@ def save_database(db: ViewDatabase, path: str | Path) -> Path:
     if not isinstance(db, ViewDatabase):
         raise InputError(f"The 'db' argument of save_database must be a ViewDatabase. Got {type(db).__name__} instead.")
     path = Path(path)
-    arrays = {name: getattr(db, name) for name in _ARRAYS}
+    arrays = {name: getattr(db, name) for name in _ARRAYS + _MODEL_ARRAYS}
     meta = {
         "format": FORMAT_NAME, "version": FORMAT_VERSION, "n_views": db.n_views,
         "classes": {c: db.class_infos[c].to_dict() for c in db.classes},
@@ -527,13 +603,15 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
             if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
                 raise DatabaseError(f"{where} is not a semslam view database: format is "
                                     f"{meta.get('format') if isinstance(meta, dict) else meta!r}, expected {FORMAT_NAME!r}.")
-            if meta.get("version") != FORMAT_VERSION:
-                raise DatabaseError(f"{where} has format version {meta.get('version')!r}; this semslam reads version "
-                                    f"{FORMAT_VERSION}. Rebuild it with 'semslam db build'.")
-            missing = [n for n in _ARRAYS if n not in npz.files]
+            version = meta.get("version")
+            if version not in READABLE_VERSIONS:
+                raise DatabaseError(f"{where} has format version {version!r}; this semslam reads versions "
+                                    f"{', '.join(map(str, READABLE_VERSIONS))}. Rebuild it with 'semslam db build'.")
+            names = _ARRAYS + (_MODEL_ARRAYS if version >= 2 else ())
+            missing = [n for n in names if n not in npz.files]
             if missing:
                 raise DatabaseError(f"{where} is missing the arrays {', '.join(missing)}.")
-            arrays = {name: npz[name] for name in _ARRAYS}
+            arrays = {name: npz[name] for name in names}
     except DatabaseError:
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
@@ -555,8 +633,12 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
         object.__setattr__(db, name, arr)
     object.__setattr__(db, "class_infos", classes)
     object.__setattr__(db, "params", dict(meta.get("params", {})))
+    if "model_labels" not in arrays:  # version 1: no pose-model views
+        for name, value in zip(_MODEL_ARRAYS, (np.zeros(0, "<U1"), np.zeros(1, np.int64), np.zeros((0, 3), np.float32),
+                                               np.zeros((0, 3)))):
+            object.__setattr__(db, name, value)
     _check_consistency(db, where, DatabaseError)
-    for name in _ARRAYS:
+    for name in _ARRAYS + _MODEL_ARRAYS:
         getattr(db, name).setflags(write=False)
     return db
 
@@ -591,3 +673,25 @@ def _check_consistency(db: ViewDatabase, where: str, error: type[SemslamError]) 
     pairs = np.char.add(np.char.add(db.labels.astype(str), "\x00"), db.view_ids.astype(str))
     if len(np.unique(pairs)) != v:
         raise error(f"{where}: (label, view_id) pairs must be unique.")
+    _check_model_arrays(db, where, error)
+
+
+def _check_model_arrays(db: ViewDatabase, where: str, error: type[SemslamError]) -> None:
+    """The pose-model views' arrays agree with each other and with the class table."""
+    labels, off, pts, vps = (getattr(db, n) for n in _MODEL_ARRAYS)
+    for name, arr, kind, ndim in (("model_labels", labels, "U", 1), ("model_point_offsets", off, "i", 1),
+                                  ("model_points_xyz_m", pts, "f", 2), ("model_viewpoints_xyz_m", vps, "f", 2)):
+        if not isinstance(arr, np.ndarray) or arr.ndim != ndim or (arr.dtype.kind != kind and arr.size):
+            raise error(f"{where}: the array {name!r} must be a {ndim}-D array of kind {kind!r}. "
+                        f"Got {getattr(arr, 'dtype', type(arr))} with {getattr(arr, 'ndim', '?')} dimension(s) instead.")
+    m = len(labels)
+    if off.shape != (m + 1,) or vps.shape != (m, 3) or pts.shape[1:] != (3,):
+        raise error(f"{where}: 'model_point_offsets' must have shape ({m + 1},), 'model_viewpoints_xyz_m' ({m}, 3) "
+                    f"and 'model_points_xyz_m' 3 columns. Got {off.shape}, {vps.shape} and {pts.shape} instead.")
+    if off[0] != 0 or off[-1] != len(pts) or (np.diff(off) < 0).any():
+        raise error(f"{where}: 'model_point_offsets' must rise from 0 to the number of model points ({len(pts)}).")
+    if not (np.isfinite(pts).all() and np.isfinite(vps).all()):
+        raise error(f"{where}: the pose-model views hold NaN or infinite values.")
+    unknown = set(labels.tolist()) - set(db.class_infos)
+    if unknown:
+        raise error(f"{where}: the pose-model views' classes {', '.join(sorted(unknown))} have no class entry.")
