@@ -51,9 +51,10 @@ class DemoConfig:
     seed : int
         Seeds everything (database acquisition, mission, recognition, SLAM): the same seed, the same run.
     quick : bool
-        One loop instead of three and a coarser SVM grid: a first look in well under a minute.
+        Two loops instead of three (one revisit, so that SLAM has something to close) and one SVM grid search
+        instead of one per fold: a first look in well under a minute.
     loops : int, optional
-        Loops of the mission (default 3, or 1 with ``quick``).
+        Loops of the mission (default 3, or 2 with ``quick``).
     modes : tuple of str
         SLAM modes run on the same detections.
     use_unreliable : bool
@@ -82,7 +83,7 @@ class DemoConfig:
 
     @property
     def n_loops(self) -> int:
-        return self.loops if self.loops is not None else (1 if self.quick else 3)
+        return self.loops if self.loops is not None else (2 if self.quick else 3)
 
 
 def _write_json(path: Path, payload: object) -> None:
@@ -114,7 +115,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     """
     from .recognition import build_database, leave_one_out, save_database
     from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission, write_mission
-    from .simulation.kinect import SURVEY_KINECT
+    from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 
     cfg = DemoConfig() if config is None else config
     out = Path(out_dir)
@@ -129,8 +130,10 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     # 1. the built-in database and its leave-one-out evaluation (the papers' Tables 1 and 2)
     views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
                                 seed=cfg.seed, config=SURVEY_KINECT)
+    model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
+                                seed=cfg.seed, config=POSE_MODEL_KINECT)
     db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
-                    progress=progress)
+                    model_views=model_views, progress=progress)
     save_database(db, out / "db.npz")
     evaluations = {}
     for descriptor in ("esf", "vfh"):
