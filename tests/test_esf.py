@@ -115,3 +115,27 @@ def test_few_points_and_duplicates_work():
     for pts in (tri, np.vstack([tri, tri, tri])):
         h = compute_esf(pts, seed=0, n_samples=500)
         assert np.isfinite(h).all() and h.sum() == pytest.approx(1.0, abs=1e-5)
+
+
+def test_parallel_evaluation_equals_the_serial_kernel():
+    """esf_evaluate (both cores) + esf_consume (draw order) accumulate exactly what the serial esf_sample does."""
+    from semslam.descriptors import _esf_kernels as K
+
+    pts = np.random.default_rng(4).normal(size=(800, 3)).astype(np.float32)
+    local, vox, lut, _ = K.esf_prepare(pts)
+    triples = np.random.default_rng(5).integers(0, 800, size=(3000, 3))
+
+    def buffers():
+        return (np.zeros(1, np.int64), np.zeros(6000, np.float32), np.zeros(6000, np.int64), np.zeros(2000, np.float32),
+                np.zeros(2000, np.float32), np.zeros((3, 64), np.float32), np.zeros(64, np.float32))
+
+    serial = buffers()
+    used_serial = K.esf_sample(local, vox, lut, triples, 2000, *serial)
+    parallel = buffers()
+    out_i = np.empty((len(triples), 11), np.int64)
+    out_f = np.empty((len(triples), 8), np.float32)
+    K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
+    used_parallel = K.esf_consume(out_i, out_f, len(triples), 2000, *parallel)
+    assert used_serial == used_parallel and serial[0][0] == 2000
+    for a, b in zip(serial, parallel):
+        np.testing.assert_array_equal(a, b)

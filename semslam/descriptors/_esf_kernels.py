@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 GRID = 64
 GRID_H = 32
@@ -319,6 +319,135 @@ def esf_sample(local, vox, lut, triples, n_samples, acc, d2v, wt_d2, d3v, wt_d3,
         h_a3[cls, th2] += np.float32(n1) / F32
         h_a3[cls, th3] += np.float32(n2) / F32
         k += 1
+    acc[0] = k
+    return t
+
+
+# Per-triple results of esf_evaluate: integer columns, then float32 columns.
+_I_OK, _I_TH1, _I_TH2, _I_TH3, _I_C1, _I_C2, _I_C3, _I_CLS, _I_N1, _I_N2, _I_N3 = range(11)
+_F_D1, _F_D2, _F_D3, _F_R1, _F_R2, _F_R3, _F_AREA, _F_WT = range(8)
+
+
+@njit(cache=True, parallel=True)
+def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - compiled
+    """Evaluate every candidate triple independently (both cores): the same float32 operations as
+    :func:`esf_sample`, with the results stored per triple (``out_i[t, 0]`` = accepted) so that
+    :func:`esf_consume` can accumulate them in draw order; the histogram is then bit-identical."""
+    m = triples.shape[0]
+    for t in prange(m):
+        out_i[t, _I_OK] = 0
+        i1 = triples[t, 0]
+        i2 = triples[t, 1]
+        i3 = triples[t, 2]
+        if i1 == i2 or i1 == i3 or i2 == i3:
+            continue
+        x1 = local[i1, 0]
+        y1 = local[i1, 1]
+        z1 = local[i1, 2]
+        x2 = local[i2, 0]
+        y2 = local[i2, 1]
+        z2 = local[i2, 2]
+        x3 = local[i3, 0]
+        y3 = local[i3, 1]
+        z3 = local[i3, 2]
+        v21x = x2 - x1
+        v21y = y2 - y1
+        v21z = z2 - z1
+        v31x = x3 - x1
+        v31y = y3 - y1
+        v31z = z3 - z1
+        v23x = x2 - x3
+        v23y = y2 - y3
+        v23z = z2 - z3
+        a = _norm4(v21x, v21y, v21z)
+        b = _norm4(v31x, v31y, v31z)
+        c = _norm4(v23x, v23y, v23z)
+        s = (a + b + c) * F05
+        heron = s * (s - a) * (s - b) * (s - c)
+        if heron <= F_AREA:
+            continue
+        v21x /= a
+        v21y /= a
+        v21z /= a
+        v31x /= b
+        v31y /= b
+        v31z /= b
+        v23x /= c
+        v23y /= c
+        v23z /= c
+        th1 = _angle_bin(_dot4(v21x, v21y, v21z, v31x, v31y, v31z))
+        th2 = _angle_bin(_dot4(v23x, v23y, v23z, v31x, v31y, v31z))
+        th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
+        if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
+            continue
+        c1, r1, in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
+        c2, r2, in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        c3, r3, in3, n3 = _lci(lut, vox[i2, 0], vox[i2, 1], vox[i2, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        vs = in1 + in2 + in3
+        pc = n1 + n2 + n3
+        if vs <= 21:
+            cls = 1
+            wt = F0
+        elif pc - vs < 4:
+            cls = 0
+            wt = F1
+        else:
+            cls = 2
+            wt = np.float32(vs) / np.float32(pc)
+        out_i[t, _I_OK] = 1
+        out_i[t, _I_TH1] = th1
+        out_i[t, _I_TH2] = th2
+        out_i[t, _I_TH3] = th3
+        out_i[t, _I_C1] = c1
+        out_i[t, _I_C2] = c2
+        out_i[t, _I_C3] = c3
+        out_i[t, _I_CLS] = cls
+        out_i[t, _I_N1] = n1
+        out_i[t, _I_N2] = n2
+        out_i[t, _I_N3] = n3
+        out_f[t, _F_D1] = _dist(x1, y1, z1, x2, y2, z2)
+        out_f[t, _F_D2] = _dist(x1, y1, z1, x3, y3, z3)
+        out_f[t, _F_D3] = _dist(x2, y2, z2, x3, y3, z3)
+        out_f[t, _F_R1] = r1
+        out_f[t, _F_R2] = r2
+        out_f[t, _F_R3] = r3
+        out_f[t, _F_AREA] = np.sqrt(np.sqrt(heron))
+        out_f[t, _F_WT] = wt
+
+
+@njit(cache=True)
+def esf_consume(out_i, out_f, m, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
+    """Accumulate the first accepted triples of :func:`esf_evaluate` in draw order, exactly as
+    :func:`esf_sample` does, until ``n_samples`` are accepted; returns the number of triples consumed."""
+    k = acc[0]
+    t = 0
+    while t < m and k < n_samples:
+        if out_i[t, _I_OK] == 0:
+            t += 1
+            continue
+        c1 = out_i[t, _I_C1]
+        c2 = out_i[t, _I_C2]
+        c3 = out_i[t, _I_C3]
+        d2v[3 * k] = out_f[t, _F_D1]
+        d2v[3 * k + 1] = out_f[t, _F_D2]
+        d2v[3 * k + 2] = out_f[t, _F_D3]
+        wt_d2[3 * k] = c1
+        wt_d2[3 * k + 1] = c2
+        wt_d2[3 * k + 2] = c3
+        if c1 == 2:
+            h_ratio[_round(out_f[t, _F_R1] * F63)] += F1
+        if c2 == 2:
+            h_ratio[_round(out_f[t, _F_R2] * F63)] += F1
+        if c3 == 2:
+            h_ratio[_round(out_f[t, _F_R3] * F63)] += F1
+        d3v[k] = out_f[t, _F_AREA]
+        wt_d3[k] = out_f[t, _F_WT]
+        cls = out_i[t, _I_CLS]
+        h_a3[cls, out_i[t, _I_TH1]] += np.float32(out_i[t, _I_N3]) / F32
+        h_a3[cls, out_i[t, _I_TH2]] += np.float32(out_i[t, _I_N1]) / F32
+        h_a3[cls, out_i[t, _I_TH3]] += np.float32(out_i[t, _I_N2]) / F32
+        k += 1
+        t += 1
     acc[0] = k
     return t
 

@@ -79,6 +79,8 @@ def compute_esf(
     h_a3 = np.zeros((3, 64), dtype=np.float32)
     h_ratio = np.zeros(64, dtype=np.float32)
     drawn = 0
+    out_i = np.empty((0, 11), dtype=np.int64)
+    out_f = np.empty((0, 8), dtype=np.float32)
     max_draws = MAX_DRAWS_PER_SAMPLE * n_samples
     while acc[0] < n_samples:
         if drawn >= max_draws:
@@ -90,7 +92,12 @@ def compute_esf(
         rate = max(acc[0] / drawn, 0.01) if drawn else 0.95
         chunk = int(min(max_draws - drawn, (n_samples - acc[0]) / rate * 1.03 + 64))
         triples = draw(chunk)
-        drawn += K.esf_sample(local, vox, lut, triples, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
+        if len(out_i) < len(triples):
+            out_i = np.empty((len(triples), 11), dtype=np.int64)
+            out_f = np.empty((len(triples), 8), dtype=np.float32)
+        # Both cores evaluate the triples; the accumulation stays sequential in draw order (bit-exact).
+        K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
+        drawn += K.esf_consume(out_i, out_f, len(triples), n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
     return K.esf_histogram(n_samples, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
 
 
