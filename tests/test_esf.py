@@ -117,25 +117,17 @@ def test_few_points_and_duplicates_work():
         assert np.isfinite(h).all() and h.sum() == pytest.approx(1.0, abs=1e-5)
 
 
-def test_parallel_evaluation_equals_the_serial_kernel():
-    """esf_evaluate (both cores) + esf_consume (draw order) accumulate exactly what the serial esf_sample does."""
-    from semslam.descriptors import _esf_kernels as K
+def test_same_histogram_on_one_or_two_threads():
+    """The triples are evaluated in parallel but accumulated in draw order: the thread count changes nothing."""
+    import numba
 
-    pts = np.random.default_rng(4).normal(size=(800, 3)).astype(np.float32)
-    local, vox, lut, _ = K.esf_prepare(pts)
-    triples = np.random.default_rng(5).integers(0, 800, size=(3000, 3))
-
-    def buffers():
-        return (np.zeros(1, np.int64), np.zeros(6000, np.float32), np.zeros(6000, np.int64), np.zeros(2000, np.float32),
-                np.zeros(2000, np.float32), np.zeros((3, 64), np.float32), np.zeros(64, np.float32))
-
-    serial = buffers()
-    used_serial = K.esf_sample(local, vox, lut, triples, 2000, *serial)
-    parallel = buffers()
-    out_i = np.empty((len(triples), 11), np.int64)
-    out_f = np.empty((len(triples), 8), np.float32)
-    K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
-    used_parallel = K.esf_consume(out_i, out_f, len(triples), 2000, *parallel)
-    assert used_serial == used_parallel and serial[0][0] == 2000
-    for a, b in zip(serial, parallel):
-        np.testing.assert_array_equal(a, b)
+    pts = np.random.default_rng(4).normal(size=(800, 3))
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = compute_esf(pts, seed=5)
+        one_pcl = compute_esf(pts, seed=5, sampler="pcl")
+    finally:
+        numba.set_num_threads(before)
+    np.testing.assert_array_equal(compute_esf(pts, seed=5), one)
+    np.testing.assert_array_equal(compute_esf(pts, seed=5, sampler="pcl"), one_pcl)

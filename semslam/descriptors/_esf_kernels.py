@@ -226,103 +226,6 @@ def _dist(px, py, pz, qx, qy, qz):  # pragma: no cover - compiled
     return np.sqrt((dx * dx + dy * dy) + dz * dz)
 
 
-@njit(cache=True)
-def esf_sample(local, vox, lut, triples, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
-    """Evaluate candidate index triples (M, 3) in order until ``n_samples`` are accepted
-    (``acc[0]`` counts them, in place), accumulating in PCL's order; returns the number of triples
-    consumed.
-
-    A triple is accepted when its points differ, its triangle is not degenerate (Heron's
-    s(s-a)(s-b)(s-c) > 0.001) and its three angle bins are valid. Per accepted sample k:
-    ``d2v[3k:3k+3]`` the side lengths, ``wt_d2[3k:3k+3]`` the classes of the lines 1-2, 1-3, 2-3
-    (0 in, 1 out, 2 mixed), ``d3v[k]`` the square-rooted area, ``wt_d3[k]`` its in-ratio; ``h_a3``
-    (3, 64) gets the A3 histograms (in, out, mix) and ``h_ratio`` the mixed-line ratios.
-    """
-    k = acc[0]
-    t = 0
-    m = triples.shape[0]
-    while t < m and k < n_samples:
-        i1 = triples[t, 0]
-        i2 = triples[t, 1]
-        i3 = triples[t, 2]
-        t += 1
-        if i1 == i2 or i1 == i3 or i2 == i3:
-            continue
-        x1 = local[i1, 0]
-        y1 = local[i1, 1]
-        z1 = local[i1, 2]
-        x2 = local[i2, 0]
-        y2 = local[i2, 1]
-        z2 = local[i2, 2]
-        x3 = local[i3, 0]
-        y3 = local[i3, 1]
-        z3 = local[i3, 2]
-        v21x = x2 - x1
-        v21y = y2 - y1
-        v21z = z2 - z1
-        v31x = x3 - x1
-        v31y = y3 - y1
-        v31z = z3 - z1
-        v23x = x2 - x3
-        v23y = y2 - y3
-        v23z = z2 - z3
-        a = _norm4(v21x, v21y, v21z)
-        b = _norm4(v31x, v31y, v31z)
-        c = _norm4(v23x, v23y, v23z)
-        s = (a + b + c) * F05
-        heron = s * (s - a) * (s - b) * (s - c)
-        if heron <= F_AREA:
-            continue
-        v21x /= a
-        v21y /= a
-        v21z /= a
-        v31x /= b
-        v31y /= b
-        v31z /= b
-        v23x /= c
-        v23y /= c
-        v23z /= c
-        th1 = _angle_bin(_dot4(v21x, v21y, v21z, v31x, v31y, v31z))
-        th2 = _angle_bin(_dot4(v23x, v23y, v23z, v31x, v31y, v31z))
-        th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
-        if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
-            continue
-        c1, r1, in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
-        c2, r2, in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
-        c3, r3, in3, n3 = _lci(lut, vox[i2, 0], vox[i2, 1], vox[i2, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
-        vs = in1 + in2 + in3
-        pc = n1 + n2 + n3
-        if vs <= 21:
-            cls = 1
-            wt = F0
-        elif pc - vs < 4:
-            cls = 0
-            wt = F1
-        else:
-            cls = 2
-            wt = np.float32(vs) / np.float32(pc)
-        d2v[3 * k] = _dist(x1, y1, z1, x2, y2, z2)
-        d2v[3 * k + 1] = _dist(x1, y1, z1, x3, y3, z3)
-        d2v[3 * k + 2] = _dist(x2, y2, z2, x3, y3, z3)
-        wt_d2[3 * k] = c1
-        wt_d2[3 * k + 1] = c2
-        wt_d2[3 * k + 2] = c3
-        if c1 == 2:
-            h_ratio[_round(r1 * F63)] += F1
-        if c2 == 2:
-            h_ratio[_round(r2 * F63)] += F1
-        if c3 == 2:
-            h_ratio[_round(r3 * F63)] += F1
-        d3v[k] = np.sqrt(np.sqrt(heron))
-        wt_d3[k] = wt
-        h_a3[cls, th1] += np.float32(n3) / F32
-        h_a3[cls, th2] += np.float32(n1) / F32
-        h_a3[cls, th3] += np.float32(n2) / F32
-        k += 1
-    acc[0] = k
-    return t
-
-
 # Per-triple results of esf_evaluate: integer columns, then float32 columns.
 _I_OK, _I_TH1, _I_TH2, _I_TH3, _I_C1, _I_C2, _I_C3, _I_CLS, _I_N1, _I_N2, _I_N3 = range(11)
 _F_D1, _F_D2, _F_D3, _F_R1, _F_R2, _F_R3, _F_AREA, _F_WT = range(8)
@@ -330,9 +233,14 @@ _F_D1, _F_D2, _F_D3, _F_R1, _F_R2, _F_R3, _F_AREA, _F_WT = range(8)
 
 @njit(cache=True, parallel=True)
 def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - compiled
-    """Evaluate every candidate triple independently (both cores): the same float32 operations as
-    :func:`esf_sample`, with the results stored per triple (``out_i[t, 0]`` = accepted) so that
-    :func:`esf_consume` can accumulate them in draw order; the histogram is then bit-identical."""
+    """Evaluate every candidate index triple (M, 3) independently (both cores), storing the results per
+    triple (``out_i[t, 0]`` = accepted) so that :func:`esf_consume` accumulates them in draw order, as PCL does.
+
+    A triple is accepted when its points differ, its triangle is not degenerate (Heron's
+    s(s-a)(s-b)(s-c) > 0.001) and its three angle bins are valid. Per accepted triple: the angle bins, the
+    classes (0 in, 1 out, 2 mixed), in-ratios and voxel counts of the lines 1-2, 1-3, 2-3, the side lengths,
+    the square-rooted area and the triangle's in-ratio weight.
+    """
     m = triples.shape[0]
     for t in prange(m):
         out_i[t, _I_OK] = 0
@@ -417,8 +325,11 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
 
 @njit(cache=True)
 def esf_consume(out_i, out_f, m, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
-    """Accumulate the first accepted triples of :func:`esf_evaluate` in draw order, exactly as
-    :func:`esf_sample` does, until ``n_samples`` are accepted; returns the number of triples consumed."""
+    """Accumulate the accepted triples of :func:`esf_evaluate` in draw order until ``n_samples`` are accepted
+    (``acc[0]`` counts them, in place); returns the number of triples consumed. Per accepted sample k:
+    ``d2v[3k:3k+3]`` the side lengths, ``wt_d2[3k:3k+3]`` their line classes, ``d3v[k]`` the square-rooted
+    area, ``wt_d3[k]`` its in-ratio; ``h_a3`` (3, 64) gets the A3 histograms (in, out, mix) and ``h_ratio`` the
+    mixed-line ratios. Sequential, so that the float32 sums are PCL's."""
     k = acc[0]
     t = 0
     while t < m and k < n_samples:
