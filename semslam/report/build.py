@@ -201,6 +201,24 @@ def _section_fig3(run_dir: Path, plt) -> Section | None:
     ax.set_ylabel("scanner x [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(fontsize=7, markerscale=6, loc="upper right")
+    detected = [k for k in range(len(labels)) if np.isfinite(poses[k]).all()]
+    if detected:  # the objects are small in a metre-wide scan: a zoom on the first one
+        k = detected[0]
+        o = poses[k][:3, 3]
+        sel = cluster == k
+        inset = ax.inset_axes([0.02, 0.02, 0.36, 0.36])
+        near = (np.abs(pts[:, 0] - o[0]) < 0.12) & (np.abs(pts[:, 1] - o[1]) < 0.12)
+        inset.scatter(pts[near & ~sel, 1], pts[near & ~sel, 0], s=0.5, c="0.75")
+        inset.scatter(pts[sel, 1], pts[sel, 0], s=2, color=colours(k % 10))
+        for axis, c in zip(range(3), ("r", "g", "b")):
+            tip = o + 0.06 * poses[k][:3, axis]
+            inset.plot([o[1], tip[1]], [o[0], tip[0]], color=c, lw=2)
+        inset.set_xlim(o[1] - 0.1, o[1] + 0.1)
+        inset.set_ylim(o[0] - 0.1, o[0] + 0.1)
+        inset.set_aspect("equal")
+        inset.set_xticks([])
+        inset.set_yticks([])
+        inset.set_title(f"zoom: {labels[k]} (20 cm)", fontsize=7)
     ax.set_title(f"Fig. 3: scan {scan_id}, recognised objects and their poses (x red, y green, z blue; 6 cm axes)")
     return Section("Fig. 3: recognition in a laser scan",
                    "The scan of the mission with the most detections, seen along the scanner's optical axis. "
