@@ -80,3 +80,16 @@ def test_refuses_to_mix_runs(quick_run, capsys):
     out, _ = quick_run
     assert main(["demo", "--quick", "--out", str(out)]) == 1
     assert "not empty" in capsys.readouterr().err
+
+
+def test_slam_runs_are_reported_alike(quick_run, tmp_path):
+    """`semslam slam --mode all` on the demo's mission and detections writes a directory `semslam report` reads."""
+    from semslam.cli.main import main
+
+    out, _ = quick_run
+    slam_out = tmp_path / "slam"
+    assert main(["slam", str(out / "mission"), "--mode", "all", "--out", str(slam_out),
+                 "--detections", str(out / "detections.jsonl")]) == 0
+    assert main(["report", str(slam_out)]) == 0
+    names = {p.name for p in (slam_out / "figures").glob("*.png")}
+    assert {"fig4_trajectories.png", "fig6_error_bounds.png", "nees.png"} <= names

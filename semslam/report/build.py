@@ -88,15 +88,14 @@ def _load_csv_dicts(path: Path) -> list[dict]:
 
 
 def _find_slam_runs(run_dir: Path) -> dict[str, Path]:
-    """``{mode: directory}`` of the SLAM outputs in a run: ``slam/<mode>/`` or the run itself."""
+    """``{mode: directory}`` of the SLAM outputs in a run: ``slam/<mode>/``, ``<mode>/`` or the run itself."""
     runs = {}
-    slam = run_dir / "slam"
-    if slam.is_dir():
+    for base in (run_dir / "slam", run_dir):  # a demo run, or `semslam slam --mode all --out RUN`
         for mode in MODE_ORDER:
-            d = slam / mode.replace("+", "_")
-            if (d / "trajectory.csv").is_file():
+            d = base / mode.replace("+", "_")
+            if mode not in runs and (d / "trajectory.csv").is_file():
                 runs[mode] = d
-    elif (run_dir / "trajectory.csv").is_file():
+    if not runs and (run_dir / "trajectory.csv").is_file():  # `semslam slam --mode M --out RUN`
         cfg = _load_json(run_dir / "metrics.json") or {}
         runs[str(cfg.get("mode", "run"))] = run_dir
     return runs
