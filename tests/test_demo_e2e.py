@@ -93,3 +93,15 @@ def test_slam_runs_are_reported_alike(quick_run, tmp_path):
     assert main(["report", str(slam_out)]) == 0
     names = {p.name for p in (slam_out / "figures").glob("*.png")}
     assert {"fig4_trajectories.png", "fig6_error_bounds.png", "nees.png"} <= names
+
+
+def test_recognize_runs_are_reported_alike(quick_run, tmp_path):
+    from semslam.cli.main import main
+
+    out, _ = quick_run
+    scan = sorted((out / "mission" / "scans").glob("scan_*.pcd"))[0]
+    run = tmp_path / "rec"
+    run.mkdir()
+    assert main(["recognize", str(scan), "--db", str(out / "db.npz"), "--out", str(run / "detections.jsonl")]) == 0
+    assert main(["report", str(run)]) == 0
+    assert "<h2>Detections</h2>" in (run / "report.html").read_text()

@@ -117,6 +117,9 @@ def build_report(run_dir: str | Path) -> Path:
     sections.append(sec) if sec else missing.append("Fig. 3 scan (fig3_scan.npz)")
     sec = _section_recognition(run_dir, plt)
     sections.append(sec) if sec else missing.append("recognition against ground truth (recognition.json)")
+    sec = _section_detections(run_dir)
+    if sec:
+        sections.append(sec)
     slam_runs = _find_slam_runs(run_dir)
     if slam_runs:
         sections.extend(_sections_slam(run_dir, slam_runs, plt))
@@ -262,6 +265,35 @@ def _section_recognition(run_dir: Path, plt) -> Section | None:
         sec.figures.append(Figure("pose_errors.png", figure_to_png(fig),
                                   "Distribution of the pose errors of correctly recognised objects."))
     return sec
+
+
+def _section_detections(run_dir: Path) -> Section | None:
+    """A table of the detections of ``*.jsonl`` files in the run (``semslam recognize --out RUN/x.jsonl``, or the
+    demo's detections.jsonl), up to 200 rows."""
+    from ..detection import Detection
+
+    rows = []
+    for path in sorted(run_dir.glob("*.jsonl")):
+        for line in path.read_text(encoding="utf-8").splitlines():
+            if not line.strip():
+                continue
+            try:
+                d = Detection.from_dict(json.loads(line))
+            except (ValueError, TypeError) as exc:
+                raise ReportError(f"{path} has a malformed detection line: {exc}") from None
+            x, y, z, r, p, yw = d.T_sensor_object.as_xyz_rpy()
+            sd = np.sqrt(np.clip(np.diag(d.covariance_6x6), 0, None))
+            rows.append([path.name, d.scan_id, d.label, d.score, f"{x:.3f} {y:.3f} {z:.3f}",
+                         f"{np.degrees(r):.1f} {np.degrees(p):.1f} {np.degrees(yw):.1f}",
+                         f"{1000 * sd[:3].max():.1f}", d.fitness, 1000 * d.rmse_m if np.isfinite(d.rmse_m) else "",
+                         "yes" if d.reliable else "no"])
+    if not rows:
+        return None
+    n = len(rows)
+    return Section("Detections", f"{n} detection(s); poses T_sensor_object in the scanner frame (m, degrees)"
+                   + ("; the first 200 are listed." if n > 200 else "."),
+                   tables=[("Detections", ["file", "scan", "label", "distance", "x y z (m)", "roll pitch yaw (deg)",
+                                           "max position sigma (mm)", "fitness", "RMSE (mm)", "reliable"], rows[:200])])
 
 
 def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
