@@ -99,9 +99,11 @@ def test_recognize_runs_are_reported_alike(quick_run, tmp_path):
     from semslam.cli.main import main
 
     out, _ = quick_run
-    scan = sorted((out / "mission" / "scans").glob("scan_*.pcd"))[0]
+    first = json.loads((out / "detections.jsonl").read_text().splitlines()[0])
+    scan = out / "mission" / "scans" / f"scan_{first['scan_id']:05d}.pcd"
     run = tmp_path / "rec"
     run.mkdir()
     assert main(["recognize", str(scan), "--db", str(out / "db.npz"), "--out", str(run / "detections.jsonl")]) == 0
     assert main(["report", str(run)]) == 0
-    assert "<h2>Detections</h2>" in (run / "report.html").read_text()
+    html = (run / "report.html").read_text()
+    assert "<h2>Detections</h2>" in html and f"<td>{first['label']}</td>" in html

@@ -273,7 +273,8 @@ def _section_detections(run_dir: Path) -> Section | None:
     from ..detection import Detection
 
     rows = []
-    for path in sorted(run_dir.glob("*.jsonl")):
+    files = sorted(run_dir.glob("*.jsonl"))
+    for path in files:
         for line in path.read_text(encoding="utf-8").splitlines():
             if not line.strip():
                 continue
@@ -287,7 +288,7 @@ def _section_detections(run_dir: Path) -> Section | None:
                          f"{np.degrees(r):.1f} {np.degrees(p):.1f} {np.degrees(yw):.1f}",
                          f"{1000 * sd[:3].max():.1f}", d.fitness, 1000 * d.rmse_m if np.isfinite(d.rmse_m) else "",
                          "yes" if d.reliable else "no"])
-    if not rows:
+    if not files:
         return None
     n = len(rows)
     return Section("Detections", f"{n} detection(s); poses T_sensor_object in the scanner frame (m, degrees)"
