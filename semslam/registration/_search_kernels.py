@@ -159,3 +159,44 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
                 n_bad += 1
         out[h] = n_bad / max(n_front, 1)
     return out
+
+
+@njit(cache=True)
+def grid_nearest(points, model_pts, origin, inv_cell, dims, cell_start, cell_points, bound):
+    """Exact nearest model point within ``bound`` of each point (N,): distance (inf beyond) and index
+    (``len(model_pts)`` beyond), as ``cKDTree.query(points, k=1, distance_upper_bound=bound)`` returns them
+    (same squared-distance arithmetic, so the same bits). The model points are bucketed in cells of edge
+    ``1 / inv_cell >= bound`` (``dims`` (3,), ``cell_start`` (C + 1,) CSR offsets into ``cell_points``):
+    the 27 cells around a point's cell hold every candidate."""
+    n, M = points.shape[0], model_pts.shape[0]
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    dist = np.full(n, np.inf)
+    idx = np.full(n, M, np.int64)
+    b2 = bound * bound
+    for q in range(n):
+        x, y, z = points[q, 0], points[q, 1], points[q, 2]
+        fi = np.floor((x - origin[0]) * inv_cell)
+        fj = np.floor((y - origin[1]) * inv_cell)
+        fk = np.floor((z - origin[2]) * inv_cell)
+        if fi < -1.0 or fj < -1.0 or fk < -1.0 or fi > nx or fj > ny or fk > nz:
+            continue
+        ci, cj, ck = int(fi), int(fj), int(fk)
+        best = np.inf
+        bj = M
+        for i in range(max(ci - 1, 0), min(ci + 2, nx)):
+            for j in range(max(cj - 1, 0), min(cj + 2, ny)):
+                for k in range(max(ck - 1, 0), min(ck + 2, nz)):
+                    c = (i * ny + j) * nz + k
+                    for s in range(cell_start[c], cell_start[c + 1]):
+                        m = cell_points[s]
+                        d0 = x - model_pts[m, 0]
+                        d1 = y - model_pts[m, 1]
+                        d2 = z - model_pts[m, 2]
+                        dd = d0 * d0 + d1 * d1 + d2 * d2
+                        if dd < best or (dd == best and m < bj):
+                            best = dd
+                            bj = m
+        if best < b2:
+            dist[q] = np.sqrt(best)
+            idx[q] = bj
+    return dist, idx

@@ -10,8 +10,8 @@ Jacobian row ``J_i = [n_i^T, (p_i x n_i)^T]`` with ``p_i = T s_i``. With the res
 symmetry axis through the target origin) are removed from the inversion and given a fixed large variance.
 
 :func:`xyz_rpy_covariance_of_inverse` then maps ``C_delta`` to the covariance of ``x y z roll pitch yaw``
-of the INVERSE transform (``T_source_target``; for pose estimation ``T_scanner_object``) by a numerical
-Jacobian (central differences).
+of the INVERSE transform (``T_source_target``; for pose estimation ``T_scanner_object``) by its analytic
+Jacobian (central differences near gimbal lock).
 """
 
 from __future__ import annotations
@@ -67,7 +67,30 @@ def xyz_rpy_covariance_of_inverse(T_target_source: np.ndarray, C_delta: np.ndarr
     """Covariance (6x6, x y z roll pitch yaw) of ``T_source_target = inv(T_target_source)``.
 
     ``C_delta`` is the covariance of a left perturbation ``Exp(delta) T_target_source`` (rho then phi).
+    With ``A = R_target_source^T``, ``inv(Exp(delta) T) = [A R(phi)^T, -A R(phi)^T rho + t]``: the Jacobian is
+    ``d xyz / d rho = -A``, ``d xyz / d phi = 0`` and ``d rpy / d phi = -E^-1`` with ``E`` the Z-Y-X body-rate
+    matrix at the inverse's roll and pitch (analytic; equal to central differences to ~1e-9). Within 1e-3 rad
+    of gimbal lock (pitch = +-90 degrees), central differences of step ``step`` are used instead.
     """
+    T_target_source = np.asarray(T_target_source, dtype=np.float64)
+    A = T_target_source[:3, :3].T
+    roll, pitch, _ = rpy_from_rotation(A)
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    if abs(cp) < 1e-3:
+        return _xyz_rpy_covariance_of_inverse_numeric(T_target_source, C_delta, step)
+    # E^-1 of E = [[1, 0, -sp], [0, cr, sr cp], [0, -sr, cr cp]] (rpy rates -> body angular velocity)
+    E_inv = np.array([[1.0, sr * sp / cp, cr * sp / cp],
+                      [0.0, cr, -sr],
+                      [0.0, sr / cp, cr / cp]])
+    J = np.zeros((6, 6))
+    J[:3, :3] = -A
+    J[3:, 3:] = -E_inv
+    C = J @ C_delta @ J.T
+    return 0.5 * (C + C.T)
+
+
+def _xyz_rpy_covariance_of_inverse_numeric(T_target_source: np.ndarray, C_delta: np.ndarray, step: float) -> np.ndarray:
+    """:func:`xyz_rpy_covariance_of_inverse` by central differences (near gimbal lock)."""
     def f(delta: np.ndarray) -> np.ndarray:
         P = np.eye(4)
         P[:3, :3] = Rotation.from_rotvec(delta[3:]).as_matrix()

@@ -79,8 +79,8 @@ def voxel_grid(
     extent = hi - lo + 1.0  # voxels per axis (float: may exceed int64)
     if float(np.prod(extent)) < 2.0**62:
         keys = _k.packed_keys(ijk, lo, int(extent[0]), int(extent[1]))
-        order = np.argsort(keys)
-        centroids, counts, inverse = _k.centroids_from_order(pts, keys[order], order)
+        order, sorted_keys = _k.radix_argsort(keys, int(float(np.prod(extent))) - 1)  # stable
+        centroids, counts, inverse = _k.centroids_from_order(pts, sorted_keys, order)
     else:  # astronomically sparse grid: sort rows (k, j, i) instead of packed keys
         _, inverse, counts = np.unique(
             ijk[:, ::-1], axis=0, return_inverse=True, return_counts=True
