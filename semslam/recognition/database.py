@@ -413,20 +413,8 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     if not views:
         raise InputError(f"The 'views' argument of {caller} must hold at least one view. Got an empty sequence.")
     class_infos = _class_infos(classes, caller)
-    seen: set[tuple[str, str]] = set()
-    for k, item in enumerate(views):
-        if not (isinstance(item, tuple) and len(item) == 3 and isinstance(item[2], PointCloud)):
-            raise InputError(f"Every item of 'views' of {caller} must be (label, view_id, PointCloud). "
-                             f"Item {k} is {type(item).__name__} instead.")
-        label, view_id, cloud = str(item[0]), str(item[1]), item[2]
-        if label not in class_infos:
-            raise InputError(f"View {k} of {caller} has class {label!r}, which 'classes' does not describe. "
-                             f"Known: {', '.join(sorted(class_infos))}.")
-        if (label, view_id) in seen:
-            raise InputError(f"The view ({label!r}, {view_id!r}) appears twice in the 'views' of {caller}.")
-        if cloud.n_points < 3:
-            raise InputError(f"View ({label!r}, {view_id!r}) of {caller} must have at least 3 points. Got {cloud.n_points}.")
-        seen.add((label, view_id))
+    views = _check_view_items(views, class_infos, caller, "views", "view")
+    seen = {(label, view_id) for label, view_id, _ in views}
     unused = set(class_infos) - {lab for lab, _ in seen}
     if unused:
         raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
@@ -467,21 +455,29 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
 
 def _check_model_views(model_views: Any, class_infos: Mapping[str, ClassInfo], caller: str) -> list:
     """``model_views`` as a list of (label, view_id, PointCloud), checked (None: empty)."""
-    if model_views is None:
-        return []
+    return [] if model_views is None else _check_view_items(model_views, class_infos, caller, "model_views",
+                                                            "model view")
+
+
+def _check_view_items(items: Any, class_infos: Mapping[str, ClassInfo], caller: str, name: str, what: str) -> list:
+    """Check a sequence of (label, view_id, PointCloud): known class, unique (label, view_id), >= 3 points.
+
+    Returns the items as a list with labels and ids as str; ``name`` / ``what`` word the errors
+    (``"views"`` / ``"view"`` or ``"model_views"`` / ``"model view"``).
+    """
     out, seen = [], set()
-    for k, item in enumerate(model_views):
+    for k, item in enumerate(items):
         if not (isinstance(item, tuple) and len(item) == 3 and isinstance(item[2], PointCloud)):
-            raise InputError(f"Every item of 'model_views' of {caller} must be (label, view_id, PointCloud). "
+            raise InputError(f"Every item of {name!r} of {caller} must be (label, view_id, PointCloud). "
                              f"Item {k} is {type(item).__name__} instead.")
         label, view_id, cloud = str(item[0]), str(item[1]), item[2]
         if label not in class_infos:
-            raise InputError(f"Model view {k} of {caller} has class {label!r}, which 'classes' does not describe. "
-                             f"Known: {', '.join(sorted(class_infos))}.")
+            raise InputError(f"{what.capitalize()} {k} of {caller} has class {label!r}, which 'classes' does not "
+                             f"describe. Known: {', '.join(sorted(class_infos))}.")
         if (label, view_id) in seen:
-            raise InputError(f"The model view ({label!r}, {view_id!r}) appears twice in the 'model_views' of {caller}.")
+            raise InputError(f"The {what} ({label!r}, {view_id!r}) appears twice in the {name!r} of {caller}.")
         if cloud.n_points < 3:
-            raise InputError(f"Model view ({label!r}, {view_id!r}) of {caller} must have at least 3 points. "
+            raise InputError(f"{what.capitalize()} ({label!r}, {view_id!r}) of {caller} must have at least 3 points. "
                              f"Got {cloud.n_points}.")
         seen.add((label, view_id))
         out.append((label, view_id, cloud))
