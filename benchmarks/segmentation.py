@@ -15,6 +15,10 @@ Table 1, per real scene with a 5 mm voxel grid, median wall time (ms) over the r
 Table 2: our two cluster back-ends (numba grid union-find vs scipy cKDTree.query_pairs + union-find) on
 the full-resolution remainders (~85k and ~140k points), and PCL's clustering of the mug's.
 Needs ../shared (SEMSLAM_SHARED) and the pcl_ref oracle (PCL_REF or ~/.cache/pcl_oracle/pcl_ref).
+
+Table 3 (``--sim N``, or ``--only sim`` for this table alone): ``segment_scene`` on N simulated ~100k-point
+scans of the four-object scene (the scans of ``benchmarks/pipeline.py``), default configuration, per
+stage (``timings_ms``), median over the scans x repeats; the real-time budget is 8 ms.
 """
 
 from __future__ import annotations
@@ -84,7 +88,13 @@ def main() -> None:
     ap.add_argument(
         "--no-kdtree", action="store_true", help="skip the slow cKDTree back-end in table 2"
     )
+    ap.add_argument("--sim", type=int, default=20, help="simulated scans in table 3 (0: skip)")
+    ap.add_argument("--only", choices=("pcl", "sim"), help="run only tables 1-2 (pcl) or 3 (sim)")
     args = ap.parse_args()
+    if args.only != "pcl" and args.sim > 0:
+        simulated(args.sim, args.repeats)
+    if args.only == "sim":
+        return
     warm = np.random.default_rng(0).uniform(size=(1000, 3)) * [1, 1, 0.001]
     ours(warm, 0)  # numba warm-up (cache load)
     print(
@@ -154,6 +164,31 @@ def main() -> None:
         print(
             f"| {scene.split('_')[0]} | {len(rest)} | {statistics.median(grid_ms):.1f} | {kd} | {ref} |"
         )
+
+
+def simulated(n_scans: int, repeats: int) -> None:
+    from semslam.segmentation import segment_scene
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+
+    mission = simulate_mission(
+        SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0
+    )
+    step = max(1, len(mission.scans) // n_scans)
+    scans = [mission.load_scan(r.scan_id) for r in mission.scans[::step][:n_scans]]
+    for scan in scans[:2]:
+        segment_scene(scan, seed=0)  # numba warm-up
+    rows = [segment_scene(scan, seed=0).timings_ms for _ in range(repeats) for scan in scans]
+    n_points = statistics.median(s.n_points for s in scans)
+    print(
+        f"segment_scene on {len(scans)} simulated scans (median {n_points:.0f} points), x{repeats}, "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores\n"
+    )
+    print("| stage | median ms | p90 ms |")
+    print("|---|---:|---:|")
+    for key in ("voxel", "planes", "clusters", "total"):
+        values = [r[key] for r in rows]
+        print(f"| {key} | {statistics.median(values):.2f} | {np.percentile(values, 90):.2f} |")
+    print()
 
 
 if __name__ == "__main__":

@@ -152,3 +152,48 @@ def test_mug_full_resolution_matches_pcl_golden(real_data):
     assert len(rest) == 85554
     sizes = [len(c) for c in extract_euclidean_clusters(rest, tolerance_m=0.02, min_size=100)]
     assert sizes == [52899, 15692, 10951, 3351, 1118, 629, 241, 238, 171, 142, 122]
+
+
+def test_label_and_filter_kernels_against_numpy():
+    """Renumbering by first occurrence and the size filter/order, against the NumPy formulation."""
+    from semslam.segmentation import _cluster_kernels as k
+
+    rng = np.random.default_rng(11)
+    roots = rng.integers(0, 40, 60)  # arbitrary root ids of 60 nodes
+    point_node = rng.integers(0, 60, 3000)
+    labels = k.first_occurrence_labels(roots, point_node)
+    per_point = roots[point_node]
+    _, first, inverse = np.unique(per_point, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    np.testing.assert_array_equal(labels, rank[inverse])
+    for lo, hi in [(1, -1), (60, 120), (80, -1), (5000, -1)]:
+        members, bounds = k.clusters_from_labels(labels, lo, hi)
+        sizes = np.bincount(labels)
+        keep = (sizes >= lo) & ((sizes <= hi) if hi >= 0 else True)
+        kept = np.flatnonzero(keep)
+        kept = kept[np.argsort(-sizes[kept], kind="stable")]
+        assert len(bounds) == len(kept) + 1
+        for c, lab in enumerate(kept):
+            np.testing.assert_array_equal(
+                members[bounds[c] : bounds[c + 1]], np.flatnonzero(labels == lab)
+            )
+
+
+def test_grid_matches_kdtree_on_a_dense_scan_like_cloud():
+    # a dense wall plus objects: most neighbour cells already share a root (the skip path)
+    rng = np.random.default_rng(12)
+    wall = np.c_[rng.uniform(0, 1.5, 6000), rng.uniform(0, 0.8, 6000), rng.normal(0, 0.002, 6000)]
+    objs = np.concatenate(
+        [rng.normal(c, 0.03, (300, 3)) for c in ([0.3, 0.3, 0.2], [1.0, 0.5, 0.15])]
+    )
+    pts = rng.permutation(np.r_[wall, objs, rng.uniform(0, 1.5, (200, 3))])
+    a = extract_euclidean_clusters(pts, tolerance_m=0.02, min_size=1, method="grid")
+    b = extract_euclidean_clusters(pts, tolerance_m=0.02, min_size=1, method="kdtree")
+    assert len(a) == len(b) > 3
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(
+        euclidean_labels(pts, tolerance_m=0.02),
+        euclidean_labels(pts, tolerance_m=0.02, method="kdtree"),
+    )

@@ -238,3 +238,70 @@ def test_mug_scene_matches_pcl_golden(real_data):
     assert abs(plane.offset_m - golden[3]) < 5e-4
     assert abs(plane.n_inliers - 123726) <= 20
     assert plane.n_iterations <= 1000
+
+
+def test_fused_kernels_equal_the_plain_formulas():
+    """The one-pass kernels give exactly what distances + threshold + two-pass covariance give."""
+    from semslam.segmentation import _plane_kernels as k
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal([3.0, -2.0, 40.0], [0.5, 0.4, 0.01], size=(5000, 3))  # far from the origin
+    coeffs = np.array([0.01, -0.02, 1.0, 0.0])
+    coeffs /= np.linalg.norm(coeffs[:3])
+    coeffs[3] = -coeffs[:3] @ [3.0, -2.0, 40.0]  # through the centre of the points
+    a, b, c, d = coeffs  # same operation order as the kernels (no BLAS dot)
+    dist = np.abs(a * pts[:, 0] + b * pts[:, 1] + c * pts[:, 2] + d)
+    want = np.flatnonzero(dist < 0.008)
+    assert 100 < len(want) < len(pts)
+    idx, sums = k.inliers_and_sum(pts, coeffs, 0.008)
+    np.testing.assert_array_equal(idx, want)
+    np.testing.assert_array_equal(k.plane_distances(pts, coeffs), dist)
+    idx2, squares = k.inliers_and_squares(pts, coeffs, 0.008)
+    np.testing.assert_array_equal(idx2, want)
+    np.testing.assert_array_equal(squares, dist[want] ** 2)
+    mean, cov = k.mean_and_covariance(pts, want)
+    mean2, cov2 = k.covariance_from_sum(pts, want, sums)
+    np.testing.assert_array_equal(mean, mean2)
+    np.testing.assert_array_equal(cov, cov2)
+    np.testing.assert_allclose(mean, pts[want].mean(axis=0), rtol=1e-14)
+    np.testing.assert_allclose(cov, np.cov(pts[want].T, bias=True), rtol=1e-9, atol=1e-15)
+    mean_all, cov_all = k.mean_and_covariance_all(pts)
+    mean3, cov3 = k.mean_and_covariance(pts, np.arange(len(pts)))
+    np.testing.assert_array_equal(mean_all, mean3)
+    np.testing.assert_array_equal(cov_all, cov3)
+
+
+def test_complement_of_removed_positions():
+    from semslam.segmentation import _plane_kernels as k
+
+    rng = np.random.default_rng(6)
+    remaining = np.sort(rng.choice(1000, 300, replace=False)).astype(np.int64)
+    removed = np.sort(rng.choice(300, 120, replace=False)).astype(np.int64)
+    mask = np.ones(300, bool)
+    mask[removed] = False
+    np.testing.assert_array_equal(k.complement(remaining, removed, 1000), remaining[mask])
+    mask = np.ones(50, bool)
+    mask[[0, 7, 49]] = False  # empty ``remaining`` stands for all 50 points
+    np.testing.assert_array_equal(
+        k.complement(np.zeros(0, np.int64), np.array([0, 7, 49]), 50), np.flatnonzero(mask)
+    )
+
+
+def test_keep_inliers_index_the_input_over_several_planes():
+    rng = np.random.default_rng(8)
+    floor = np.c_[rng.uniform(-1, 1, (3000, 2)), np.full(3000, 2.0)]
+    wall = np.c_[np.full(2000, 1.2), rng.uniform(-1, 1, 2000), rng.uniform(0.5, 1.9, 2000)]
+    clutter = rng.uniform(-0.5, 0.5, (500, 3)) + [0, 0, 1.0]
+    pts = rng.permutation(np.r_[floor, wall, clutter])
+    res = remove_dominant_planes(
+        pts, distance_threshold_m=0.01, max_planes=3, keep_inliers=True, seed=0
+    )
+    assert len(res.planes) == 2
+    seen = np.zeros(len(pts), int)
+    for plane in res.planes:
+        np.testing.assert_array_less(
+            np.abs(pts[plane.inlier_indices] @ plane.normal_xyz + plane.offset_m), 0.01
+        )
+        seen[plane.inlier_indices] += 1
+    seen[res.remaining_indices] += 1
+    assert seen.min() == 1 and seen.max() == 1  # a partition of the input

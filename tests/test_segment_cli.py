@@ -179,3 +179,73 @@ def test_cli_bad_options_exit_1(scene_file, capsys, argv, match):
 def test_cli_missing_file(tmp_path, capsys):
     assert main(["segment", str(tmp_path / "nope.pcd")]) == 1
     assert "nope.pcd" in capsys.readouterr().err
+
+
+def _sha(a) -> str:
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()[:16]
+
+
+def test_matches_golden_of_previous_implementation():
+    """Bit-identical to the sort-based implementation before the latency pass (golden fingerprints
+    from tests/data/segmentation/make_scene_golden.py): voxel centroids and order, intensity means,
+    point -> voxel map, plane inliers, cluster partitions and order, input indices."""
+    from pathlib import Path
+
+    from semslam.segmentation import voxel_grid
+
+    golden = json.loads(
+        (Path(__file__).parent / "data" / "segmentation" / "segment_scene_golden.json").read_text()
+    )
+    for case in golden["cases"]:
+        cloud, _ = tank_scene(case["scene_seed"])
+        if "config" not in case:
+            g = voxel_grid(
+                cloud.points_xyz_m, case["voxel_leaf_m"], pcl_rounding=case["pcl_rounding"]
+            )
+            assert g.n_voxels == case["n_voxels"]
+            assert _sha(g.points_xyz_m) == case["centroids_sha"]
+            assert _sha(g.point_voxel) == case["point_voxel_sha"]
+            assert _sha(g.counts) == case["counts_sha"]
+            continue
+        r = segment_scene(cloud, SegmentationConfig(**case["config"]), seed=case["seed"])
+        assert r.segmented_cloud.n_points == case["n_segmented"]
+        assert _sha(r.segmented_cloud.points_xyz_m) == case["centroids_sha"]
+        assert _sha(r.segmented_cloud.intensity) == case["intensity_sha"]
+        if case["point_voxel_sha"] is None:
+            assert r.point_voxel is None
+        else:
+            assert _sha(r.point_voxel) == case["point_voxel_sha"]
+        assert len(r.planes) == len(case["planes"])
+        for plane, want in zip(r.planes, case["planes"]):
+            assert plane.n_inliers == want["n_inliers"]
+            assert (plane.n_iterations, plane.n_scored) == (want["n_iterations"], want["n_scored"])
+            np.testing.assert_allclose(plane.coefficients, want["coefficients"], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(plane.rmse_m, want["rmse_m"], rtol=1e-12)
+        assert r.n_after_planes == case["n_after_planes"]
+        assert r.cluster_sizes == case["cluster_sizes"]
+        assert [_sha(c) for c in r.cluster_indices] == case["clusters_sha"]
+        assert [_sha(r.input_indices(k)) for k in range(r.n_clusters)] == case["input_indices_sha"]
+
+
+@pytest.mark.parametrize("leaf", [0.01, 0.03])
+def test_input_indices_against_brute_force(leaf):
+    # small clusters take the per-voxel gather path, large ones (the floor with max_planes=0) the mask
+    cloud, _ = tank_scene(2)
+    for cfg in (
+        SegmentationConfig(voxel_leaf_m=leaf, min_cluster_size=1, max_cluster_size=None),
+        SegmentationConfig(
+            voxel_leaf_m=leaf, max_planes=0, min_cluster_size=1, max_cluster_size=None
+        ),
+    ):
+        res = segment_scene(cloud, cfg, seed=0)
+        assert res.n_clusters >= 1
+        covered = np.zeros(cloud.n_points, int)
+        for k in range(res.n_clusters):
+            want = np.flatnonzero(np.isin(res.point_voxel, res.cluster_indices[k]))
+            got = res.input_indices(k)
+            assert got.dtype == np.int64
+            np.testing.assert_array_equal(got, want)
+            covered[got] += 1
+        assert covered.max() == 1  # clusters are disjoint in the input too

@@ -109,3 +109,47 @@ def test_voxel_counts_match_pcl(real_data, test_data, scene):
     np.minimum.at(lo, grid.point_voxel, ijk)
     scaled = grid.points_xyz_m / 0.005  # float32 rounding moves boundary points by < 1e-4 voxel
     assert np.all(scaled >= lo - 1e-4) and np.all(scaled <= lo + 1 + 1e-4)
+
+
+@pytest.mark.parametrize(
+    "scale, leaf, lo_keys, hi_keys",
+    [
+        (0.5, 0.01, 0, 2**31),  # key and point index packed in one word
+        (20.0, 1e-4, 2**31, 2**62),  # (key, index) radix sort
+        (1e6, 1e-9, 2**62, np.inf),  # row-wise np.unique
+    ],
+)
+def test_every_key_width_matches_brute_force_with_values(scale, leaf, lo_keys, hi_keys):
+    from semslam.segmentation.voxel import _voxel_grid
+
+    rng = np.random.default_rng(7)
+    base = rng.uniform(-scale, scale, size=(40, 3))
+    pts = np.repeat(base, 5, axis=0) + rng.uniform(0, leaf * 0.9, size=(200, 3))  # ~40 voxels
+    pts = pts[rng.permutation(len(pts))]
+    values = rng.uniform(0, 100, len(pts))
+    n_keys = np.prod(np.floor(pts.max(0) / leaf) - np.floor(pts.min(0) / leaf) + 1)
+    assert lo_keys < n_keys <= hi_keys  # the code path this case is meant to exercise
+    grid, means, _ = _voxel_grid(np.ascontiguousarray(pts), leaf, False, values)
+    oracle = brute_force_voxels(pts, leaf)
+    keys = sorted(oracle, key=lambda ijk: (ijk[2], ijk[1], ijk[0]))
+    assert grid.n_voxels == len(oracle)
+    np.testing.assert_allclose(grid.points_xyz_m, [oracle[k] for k in keys], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(np.bincount(grid.point_voxel), grid.counts)
+    # per-voxel means are np.bincount's, bit for bit (the intensity of segment_scene)
+    want = np.bincount(grid.point_voxel, weights=values, minlength=grid.n_voxels) / grid.counts
+    np.testing.assert_array_equal(means, want)
+    np.testing.assert_array_equal(voxel_grid(pts, leaf).points_xyz_m, grid.points_xyz_m)
+
+
+def test_pcl_rounding_matches_float32_brute_force():
+    rng = np.random.default_rng(3)
+    leaf = 0.005
+    pts = rng.uniform(-0.2, 0.3, size=(3000, 3))
+    # put points right at float32 voxel boundaries, where float32 and float64 floors disagree
+    pts[:300] = np.round(pts[:300] / leaf) * leaf
+    grid = voxel_grid(pts, leaf, pcl_rounding=True)
+    inv = np.float32(1.0 / leaf)
+    ijk = np.floor(pts.astype(np.float32) * inv).astype(np.int64)
+    _, inverse, counts = np.unique(ijk[:, ::-1], axis=0, return_inverse=True, return_counts=True)
+    np.testing.assert_array_equal(grid.point_voxel, inverse.reshape(-1))
+    np.testing.assert_array_equal(grid.counts, counts)

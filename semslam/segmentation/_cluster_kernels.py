@@ -79,7 +79,8 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     Each cell pair is visited once, from the cell with the smaller key: only the 13 rows (dy, dz)
     with dz > 0, or dz == 0 and dy >= 0, can hold larger keys. Because the cells are visited in key
     order, the start of each neighbour row only moves forward (one pointer per row, no search).
-    Pairs whose bounding boxes are >= tol apart, or already in one component, are skipped.
+    Pairs already in one component (root of ``a`` kept up to date), or whose bounding boxes are
+    >= tol apart, are skipped.
     """
     m = cell_keys.shape[0]
     tol2 = tol * tol
@@ -101,6 +102,7 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     ptr = np.zeros(n_rows, np.int64)
     for a in range(m):
         key_a = cell_keys[a]
+        root_a = _find(parent, a)
         for r in range(n_rows):
             row = key_a + row_offset[r]
             b = ptr[r]
@@ -109,8 +111,11 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
             ptr[r] = b
             while b < m and cell_keys[b] <= row + 2:
                 if b > a:
-                    dx = cell_keys[b] - row
-                    skip = abs(dx) == 2 and abs(row_dy[r]) == 2 and row_dz[r] == 2
+                    root_b = _find(parent, b)
+                    skip = root_b == root_a  # already one component: nothing to learn
+                    if not skip:
+                        dx = cell_keys[b] - row
+                        skip = abs(dx) == 2 and abs(row_dy[r]) == 2 and row_dz[r] == 2
                     if not skip:
                         gap2 = 0.0
                         for ax in range(3):
@@ -120,7 +125,7 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
                             if g > 0.0:
                                 gap2 += g * g
                         skip = gap2 >= tol2
-                    if not skip and _find(parent, a) != _find(parent, b):
+                    if not skip:
                         joined = False
                         for ia in range(cell_start[a], cell_start[a + 1]):
                             pa = order[ia]
@@ -137,8 +142,12 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
                                     break
                             if joined:
                                 break
-                        if joined:
-                            _union(parent, a, b)
+                        if joined:  # link the roots: the smaller index becomes the root
+                            if root_a < root_b:
+                                parent[root_b] = root_a
+                            else:
+                                parent[root_a] = root_b
+                                root_a = root_b
                 b += 1
     roots = np.empty(m, np.int64)
     for c in range(m):
@@ -156,3 +165,139 @@ def pair_components(n, pairs):
     for i in range(n):
         roots[i] = _find(parent, i)
     return roots
+
+
+@njit(cache=True)
+def _radix_argsort(keys, max_key):
+    """Stable argsort (N,) int64 of non-negative int64 ``keys`` <= ``max_key`` (LSD radix sort on
+    11-bit digits). A copy of ``_voxel_kernels.radix_argsort``: numba's on-disk cache does not
+    notice edits to a jitted callee in another module, so kernels here call only this file."""
+    n = keys.shape[0]
+    order = np.arange(n)
+    k_cur = keys.copy()
+    order_tmp = np.empty(n, np.int64)
+    k_tmp = np.empty(n, np.int64)
+    count = np.empty(2049, np.int64)
+    shift = 0
+    while shift == 0 or (shift < 63 and (max_key >> shift) > 0):
+        count[:] = 0
+        for i in range(n):
+            count[((k_cur[i] >> shift) & 0x7FF) + 1] += 1
+        if count[1] != n:
+            for d in range(2048):
+                count[d + 1] += count[d]
+            for i in range(n):
+                d = (k_cur[i] >> shift) & 0x7FF
+                r = count[d]
+                count[d] = r + 1
+                order_tmp[r] = order[i]
+                k_tmp[r] = k_cur[i]
+            order, order_tmp = order_tmp, order
+            k_cur, k_tmp = k_tmp, k_cur
+        shift += 11
+    return order, k_cur
+
+
+@njit(cache=True)
+def grid_labels(points, cell, tol):
+    """Connected-component labels (N,) int64 of the points under "distance < tol", numbered by the
+    smallest point index of each component, by the grid union-find (:func:`grid_components`) with
+    cubic cells of edge ``cell`` (< tol / sqrt(3)). N >= 1. Returns ``(True, labels)``, or
+    ``(False, empty)`` when the padded grid needs keys of 2**62 or more (use the k-d tree)."""
+    n = points.shape[0]
+    lo = np.full(3, np.inf)
+    for i in range(n):
+        for a in range(3):
+            lo[a] = min(lo[a], points[i, a])
+    ijk = np.empty((n, 3), np.int64)
+    hi = np.zeros(3)
+    for i in range(n):
+        for a in range(3):
+            v = np.floor((points[i, a] - lo[a]) / cell)
+            hi[a] = max(hi[a], v)
+            ijk[i, a] = np.int64(v)  # exact: checked below that the grid is small
+    extent = hi + 5.0  # +2 padding on each side, +1
+    if extent[0] * extent[1] * extent[2] >= 2.0**62:
+        return False, np.empty(0, np.int64)
+    nx = np.int64(extent[0])
+    ny = np.int64(extent[1])
+    keys = np.empty(n, np.int64)
+    for i in range(n):
+        keys[i] = (ijk[i, 0] + 2) + nx * ((ijk[i, 1] + 2) + ny * (ijk[i, 2] + 2))
+    order, sorted_keys = _radix_argsort(keys, np.int64(extent[0] * extent[1] * extent[2]) - 1)
+    m = 1
+    for r in range(1, n):
+        if sorted_keys[r] != sorted_keys[r - 1]:
+            m += 1
+    cell_keys = np.empty(m, np.int64)
+    cell_start = np.empty(m + 1, np.int64)
+    point_cell = np.empty(n, np.int64)
+    c = -1
+    for r in range(n):
+        if r == 0 or sorted_keys[r] != sorted_keys[r - 1]:
+            c += 1
+            cell_keys[c] = sorted_keys[r]
+            cell_start[c] = r
+        point_cell[order[r]] = c
+    cell_start[m] = n
+    roots = grid_components(points, order, cell_keys, cell_start, nx, ny, tol)
+    return True, first_occurrence_labels(roots, point_cell)
+
+
+@njit(cache=True)
+def first_occurrence_labels(roots, point_node):
+    """Label (N,) of each point: its node's root ``roots[point_node[i]]`` renumbered 0, 1, ... in
+    order of first occurrence over the points (the component of point 0 is 0, ...)."""
+    n = point_node.shape[0]
+    label_of_root = np.full(roots.shape[0], -1, np.int64)
+    labels = np.empty(n, np.int64)
+    n_labels = 0
+    for i in range(n):
+        r = roots[point_node[i]]
+        lab = label_of_root[r]
+        if lab < 0:
+            lab = n_labels
+            label_of_root[r] = lab
+            n_labels += 1
+        labels[i] = lab
+    return labels
+
+
+@njit(cache=True)
+def clusters_from_labels(labels, min_size, max_size):
+    """Members of the clusters of size in [min_size, max_size] (max_size < 0: no limit), largest
+    first (ties: smaller label first), indices ascending within each: flat members (K,) int64 and
+    bounds (C + 1,) int64 (cluster c is ``members[bounds[c]:bounds[c + 1]]``)."""
+    n = labels.shape[0]
+    n_labels = 0
+    for i in range(n):
+        n_labels = max(n_labels, labels[i] + 1)
+    sizes = np.zeros(n_labels, np.int64)
+    for i in range(n):
+        sizes[labels[i]] += 1
+    n_kept = 0
+    for lab in range(n_labels):
+        if sizes[lab] >= min_size and (max_size < 0 or sizes[lab] <= max_size):
+            n_kept += 1
+    kept = np.empty(n_kept, np.int64)
+    j = 0
+    for lab in range(n_labels):
+        if sizes[lab] >= min_size and (max_size < 0 or sizes[lab] <= max_size):
+            kept[j] = lab
+            j += 1
+    kept = kept[np.argsort(-sizes[kept], kind="mergesort")]  # stable: ties by label
+    start_of = np.full(n_labels, -1, np.int64)
+    bounds = np.empty(n_kept + 1, np.int64)
+    total = 0
+    for c in range(n_kept):
+        bounds[c] = total
+        start_of[kept[c]] = total
+        total += sizes[kept[c]]
+    bounds[n_kept] = total
+    members = np.empty(total, np.int64)
+    for i in range(n):
+        s = start_of[labels[i]]
+        if s >= 0:
+            members[s] = i
+            start_of[labels[i]] = s + 1
+    return members, bounds

@@ -151,51 +151,142 @@ def plane_distances(points, coefficients):
 @njit(cache=True)
 def mean_and_covariance(points, indices):
     """Centroid (3,) and covariance (3, 3) (divided by M) of ``points[indices]``; two passes for
-    accuracy far from the origin. ``indices`` (M,) int64, M >= 1."""
+    accuracy far from the origin. ``indices`` (M,) int64, M >= 1. Sums accumulate in scalars
+    (registers), in index order."""
     m = indices.shape[0]
-    mean = np.zeros(3)
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
     for r in range(m):
         i = indices[r]
-        mean[0] += points[i, 0]
-        mean[1] += points[i, 1]
-        mean[2] += points[i, 2]
-    mean /= m
-    cov = np.zeros((3, 3))
-    for r in range(m):
-        i = indices[r]
-        dx = points[i, 0] - mean[0]
-        dy = points[i, 1] - mean[1]
-        dz = points[i, 2] - mean[2]
-        cov[0, 0] += dx * dx
-        cov[0, 1] += dx * dy
-        cov[0, 2] += dx * dz
-        cov[1, 1] += dy * dy
-        cov[1, 2] += dy * dz
-        cov[2, 2] += dz * dz
-    cov[1, 0] = cov[0, 1]
-    cov[2, 0] = cov[0, 2]
-    cov[2, 1] = cov[1, 2]
-    return mean, cov / m
+        sx += points[i, 0]
+        sy += points[i, 1]
+        sz += points[i, 2]
+    return _covariance_about(points, indices, m, sx / m, sy / m, sz / m)
 
 
 @njit(cache=True)
-def within(distances, threshold):
-    """Sorted indices (int64) of the distances strictly below ``threshold``."""
-    n = distances.shape[0]
-    count = 0
-    for i in range(n):
-        if distances[i] < threshold:
-            count += 1
-    out = np.empty(count, np.int64)
-    j = 0
-    for i in range(n):
-        if distances[i] < threshold:
-            out[j] = i
-            j += 1
-    return out
+def _covariance_about(points, indices, m, mx, my, mz):
+    """Mean (3,) and covariance (3, 3) / m about (mx, my, mz) of the points at ``indices``, or of
+    the first ``m`` points when ``indices`` is empty."""
+    cxx = 0.0
+    cxy = 0.0
+    cxz = 0.0
+    cyy = 0.0
+    cyz = 0.0
+    czz = 0.0
+    use_all = indices.shape[0] == 0
+    for r in range(m):
+        i = r if use_all else indices[r]
+        dx = points[i, 0] - mx
+        dy = points[i, 1] - my
+        dz = points[i, 2] - mz
+        cxx += dx * dx
+        cxy += dx * dy
+        cxz += dx * dz
+        cyy += dy * dy
+        cyz += dy * dz
+        czz += dz * dz
+    mean = np.empty(3)
+    mean[0] = mx
+    mean[1] = my
+    mean[2] = mz
+    cov = np.empty((3, 3))
+    cov[0, 0] = cxx / m
+    cov[0, 1] = cxy / m
+    cov[0, 2] = cxz / m
+    cov[1, 1] = cyy / m
+    cov[1, 2] = cyz / m
+    cov[2, 2] = czz / m
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]
+    return mean, cov
 
 
 @njit(cache=True)
 def mean_and_covariance_all(points):
-    """:func:`mean_and_covariance` of all the (N, 3) points."""
-    return mean_and_covariance(points, np.arange(points.shape[0]))
+    """:func:`mean_and_covariance` of all the (N, 3) points (same arithmetic, no index array)."""
+    m = points.shape[0]
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    for i in range(m):
+        sx += points[i, 0]
+        sy += points[i, 1]
+        sz += points[i, 2]
+    return _covariance_about(points, np.empty(0, np.int64), m, sx / m, sy / m, sz / m)
+
+
+@njit(cache=True)
+def inliers_and_sum(points, coefficients, threshold):
+    """Sorted indices (int64) of the points at distance strictly below ``threshold`` of a
+    unit-normal plane (:func:`plane_distances` below the threshold), and the sum (3,) of their
+    coordinates accumulated in index order (the first pass of :func:`mean_and_covariance`, bit
+    for bit). One pass: the indices are a view of an (N,) buffer; no distance array is stored."""
+    n = points.shape[0]
+    a, b, c, d = coefficients[0], coefficients[1], coefficients[2], coefficients[3]
+    idx = np.empty(n, np.int64)
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    j = 0
+    for i in range(n):
+        x = points[i, 0]
+        y = points[i, 1]
+        z = points[i, 2]
+        if abs(a * x + b * y + c * z + d) < threshold:
+            idx[j] = i
+            j += 1
+            sx += x
+            sy += y
+            sz += z
+    sums = np.empty(3)
+    sums[0] = sx
+    sums[1] = sy
+    sums[2] = sz
+    return idx[:j], sums
+
+
+@njit(cache=True)
+def inliers_and_squares(points, coefficients, threshold):
+    """Sorted inlier indices (int64) as :func:`inliers_and_sum`, and their squared distances
+    (equal to ``plane_distances(points, coefficients)[inliers] ** 2``)."""
+    n = points.shape[0]
+    a, b, c, d = coefficients[0], coefficients[1], coefficients[2], coefficients[3]
+    idx = np.empty(n, np.int64)
+    sq = np.empty(n)
+    j = 0
+    for i in range(n):
+        v = abs(a * points[i, 0] + b * points[i, 1] + c * points[i, 2] + d)
+        if v < threshold:
+            idx[j] = i
+            sq[j] = v * v
+            j += 1
+    return idx[:j], sq[:j]
+
+
+@njit(cache=True)
+def covariance_from_sum(points, indices, sums):
+    """:func:`mean_and_covariance` of ``points[indices]`` (M >= 1) given the coordinate sums (3,)
+    of :func:`inliers_and_sum` (same result, one pass fewer)."""
+    m = indices.shape[0]
+    return _covariance_about(points, indices, m, sums[0] / m, sums[1] / m, sums[2] / m)
+
+
+@njit(cache=True)
+def complement(remaining, removed, n):
+    """``remaining`` (R,) without the entries at the sorted, unique positions ``removed`` (K,);
+    an empty ``remaining`` stands for ``arange(n)``."""
+    all_points = remaining.shape[0] == 0
+    r = n if all_points else remaining.shape[0]
+    out = np.empty(r - removed.shape[0], np.int64)
+    j = 0
+    o = 0
+    for i in range(r):
+        if j < removed.shape[0] and removed[j] == i:
+            j += 1
+        else:
+            out[o] = i if all_points else remaining[i]
+            o += 1
+    return out

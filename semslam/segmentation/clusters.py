@@ -8,7 +8,8 @@ first; PCL leaves ties in an unspecified order).
 
 Methods: ``"grid"`` (default) is a numba union-find over grid cells (see ``_cluster_kernels``);
 ``"kdtree"`` uses scipy's ``cKDTree.query_pairs`` and a union-find over the point pairs. Both give
-the same partition; the grid is ~10x faster on dense scans (benchmarks/segmentation.py).
+the same partition; the grid is ~10x faster on dense scans (benchmarks/segmentation.py). The grid
+method, the renumbering and the size filtering run in numba kernels (no NumPy glue).
 """
 
 from __future__ import annotations
@@ -48,43 +49,25 @@ def euclidean_labels(
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller)
     tol = check_positive("tolerance_m", tolerance_m, caller=caller)
     check_choice("method", method, ("grid", "kdtree"), caller=caller)
+    return _labels(pts, tol, method)
+
+
+def _labels(pts: np.ndarray, tol: float, method: str) -> np.ndarray:
+    """euclidean_labels on validated arguments (``pts`` C-contiguous finite float64 (N, 3))."""
     n = len(pts)
     if n == 0:
         return np.zeros(0, np.int64)
-    roots = None
     if method == "grid":
-        roots = _grid_roots(pts, tol)
-    if roots is None:  # kdtree requested, or a grid too fine for 64-bit keys
-        pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray").astype(np.int64)
-        if len(pairs):
-            diff = pts[pairs[:, 0]] - pts[pairs[:, 1]]
-            pairs = pairs[np.einsum("ij,ij->i", diff, diff) < tol * tol]  # strict, as the grid
-        roots = _k.pair_components(n, np.ascontiguousarray(pairs))
-    # renumber by first occurrence: label of the component of the smallest point index first
-    _, first, inverse = np.unique(roots, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return rank[inverse.reshape(-1)]
-
-
-def _grid_roots(pts: np.ndarray, tol: float) -> np.ndarray | None:
-    cell = tol / math.sqrt(3.0) * (1.0 - 1e-9)
-    ijk = np.floor((pts - pts.min(axis=0)) / cell)
-    extent = ijk.max(axis=0) + 5.0  # +2 padding on each side, +1
-    if float(np.prod(extent)) >= 2.0**62:
-        return None
-    ijk = ijk.astype(np.int64) + 2
-    nx, ny = int(extent[0]), int(extent[1])
-    keys = ijk[:, 0] + nx * (ijk[:, 1] + ny * ijk[:, 2])
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    cell_keys = sorted_keys[starts]
-    cell_start = np.r_[starts, len(pts)].astype(np.int64)
-    cell_roots = _k.grid_components(pts, order, cell_keys, cell_start, nx, ny, float(tol))
-    point_cell = np.empty(len(pts), np.int64)
-    point_cell[order] = np.repeat(np.arange(len(cell_keys)), np.diff(cell_start))
-    return cell_roots[point_cell]
+        ok, labels = _k.grid_labels(pts, tol / math.sqrt(3.0) * (1.0 - 1e-9), float(tol))
+        if ok:
+            return labels
+    # kdtree requested, or a grid too fine for 64-bit keys
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray").astype(np.int64)
+    if len(pairs):
+        diff = pts[pairs[:, 0]] - pts[pairs[:, 1]]
+        pairs = pairs[np.einsum("ij,ij->i", diff, diff) < tol * tol]  # strict, as the grid
+    roots = _k.pair_components(n, np.ascontiguousarray(pairs))
+    return _k.first_occurrence_labels(roots, np.arange(n))
 
 
 def extract_euclidean_clusters(
@@ -123,15 +106,19 @@ def extract_euclidean_clusters(
         raise InputError(
             f"The 'max_size' argument of {caller} must be >= min_size={lo}. Got {hi} instead."
         )
-    labels = euclidean_labels(pts, tolerance_m=tolerance_m, method=method)
+    tol = check_positive("tolerance_m", tolerance_m, caller=caller)
+    check_choice("method", method, ("grid", "kdtree"), caller=caller)
+    return _clusters(pts, tol, lo, hi, method)
+
+
+def _clusters(
+    pts: np.ndarray, tol: float, min_size: int, max_size: int | None, method: str = "grid"
+) -> list[np.ndarray]:
+    """extract_euclidean_clusters on validated arguments."""
+    labels = _labels(pts, tol, method)
     if len(labels) == 0:
         return []
-    sizes = np.bincount(labels)
-    keep = sizes >= lo
-    if hi is not None:
-        keep &= sizes <= hi
-    kept = np.flatnonzero(keep)  # labels are numbered by first point index: tie order
-    kept = kept[np.argsort(-sizes[kept], kind="stable")]
-    order = np.argsort(labels, kind="stable")  # indices ascending within each label
-    bounds = np.r_[0, np.cumsum(sizes)]
-    return [order[bounds[c] : bounds[c + 1]].astype(np.int64) for c in kept]
+    members, bounds = _k.clusters_from_labels(
+        labels, min_size, -1 if max_size is None else max_size
+    )
+    return [members[bounds[c] : bounds[c + 1]] for c in range(len(bounds) - 1)]

@@ -207,19 +207,17 @@ def _fit(
             f"fit_plane_rmsac drew {n_degenerate} degenerate samples (repeated or collinear points) out of "
             f"{len(pts)} points and found no plane hypothesis."
         )
-    dist = _k.plane_distances(pts, coeffs)
-    inliers = _k.within(dist, thr)
+    inliers, sums = _k.inliers_and_sum(pts, coeffs, thr)
     if refine and len(inliers) >= 3:
-        refined = _least_squares_plane(pts, inliers)
+        refined = _least_squares_plane(pts, inliers, sums)
         if refined is not None:
             coeffs = refined
-            dist = _k.plane_distances(pts, coeffs)
-            inliers = _k.within(dist, thr)
+    inliers, squares = _k.inliers_and_squares(pts, coeffs, thr)
     coeffs = _orient(coeffs)
-    rmse = float(np.sqrt(np.mean(dist[inliers] ** 2))) if len(inliers) else math.nan
+    rmse = float(np.sqrt(np.mean(squares))) if len(inliers) else math.nan
     return PlaneModel(
         coefficients=coeffs,
-        inlier_indices=inliers.astype(np.int64),
+        inlier_indices=inliers,
         n_inliers=len(inliers),
         n_points=len(pts),
         rmse_m=rmse,
@@ -230,10 +228,16 @@ def _fit(
     )
 
 
-def _least_squares_plane(pts: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+def _least_squares_plane(
+    pts: np.ndarray, indices: np.ndarray, sums: np.ndarray | None = None
+) -> np.ndarray | None:
     """Total-least-squares plane (4,) of ``pts[indices]``: normal = smallest-eigenvalue eigenvector
-    of the covariance. None when the points are collinear (no unique plane)."""
-    centroid, cov = _k.mean_and_covariance(pts, indices)
+    of the covariance. None when the points are collinear (no unique plane). ``sums``: the (3,)
+    coordinate sums of those points in index order, when already known."""
+    if sums is None:
+        centroid, cov = _k.mean_and_covariance(pts, indices)
+    else:
+        centroid, cov = _k.covariance_from_sum(pts, indices, sums)
     eigval, eigvec = np.linalg.eigh(cov)
     if not eigval[2] > 0 or eigval[1] <= 1e-12 * eigval[2]:
         return None
@@ -328,12 +332,30 @@ def remove_dominant_planes(
         else check_int("min_inliers", min_inliers, caller=caller, minimum=3)
     )
     conf, max_it, n_pre, rng = _check_sampling(confidence, max_iterations, n_pretest, seed, caller)
-    remaining = np.arange(len(pts), dtype=np.int64)
+    return _remove_planes(
+        pts, thr, k_max, min_in, bool(keep_inliers), conf, max_it, n_pre, rng, caller
+    )
+
+
+def _remove_planes(
+    pts: np.ndarray,
+    thr: float,
+    k_max: int,
+    min_in: int,
+    keep_inliers: bool,
+    conf: float,
+    max_it: int,
+    n_pre: int,
+    rng: np.random.Generator,
+    caller: str,
+) -> PlaneRemovalResult:
+    """remove_dominant_planes on validated arguments (``pts`` C-contiguous finite float64 (N, 3))."""
+    remaining = _ALL  # empty: all the points (np.arange only when needed)
     planes: list[PlaneModel] = []
     reason = "max_planes reached"
     while len(planes) < k_max:
         try:
-            subset = pts if len(remaining) == len(pts) else pts[remaining]
+            subset = pts if remaining is _ALL else pts[remaining]
             plane = _fit(subset, thr, conf, max_it, n_pre, True, rng, caller)
         except SegmentationError as exc:
             if not planes:
@@ -343,15 +365,18 @@ def remove_dominant_planes(
         if plane.n_inliers < min_in:
             reason = f"next plane has {plane.n_inliers} inliers < min_inliers={min_in}"
             break
-        mask = np.ones(len(remaining), bool)
-        mask[plane.inlier_indices] = False
-        planes.append(
-            replace(plane, inlier_indices=remaining[plane.inlier_indices] if keep_inliers else None)
-        )
-        remaining = remaining[mask]
+        if keep_inliers:
+            kept = plane.inlier_indices if remaining is _ALL else remaining[plane.inlier_indices]
+        planes.append(replace(plane, inlier_indices=kept if keep_inliers else None))
+        remaining = _k.complement(remaining, plane.inlier_indices, len(pts))
         if len(remaining) == 0:
             reason = "no points left"
             break
+    if remaining is _ALL:
+        remaining = np.arange(len(pts), dtype=np.int64)
     return PlaneRemovalResult(
         remaining_indices=remaining, planes=planes, n_points=len(pts), stop_reason=reason
     )
+
+
+_ALL = np.zeros(0, np.int64)

@@ -3,17 +3,19 @@ optional voxel grid, removal of the dominant plane(s) by RMSAC, Euclidean cluste
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .._validation import check_int, check_positive
+from .._validation import as_rng, check_int, check_positive
 from ..cloud import PointCloud
 from ..errors import InputError, SegmentationError
-from .clusters import extract_euclidean_clusters
-from .plane import PlaneModel, remove_dominant_planes
-from .voxel import voxel_grid
+from . import _voxel_kernels
+from .clusters import _clusters
+from .plane import PlaneModel, _remove_planes
+from .voxel import _voxel_grid
 
 __all__ = ["SegmentationConfig", "SegmentationResult", "segment_scene"]
 
@@ -113,6 +115,8 @@ class SegmentationResult:
     n_after_planes: int
     timings_ms: dict[str, float]
     notes: list[str] = field(default_factory=list)
+    # (packed point-by-voxel order, voxel run starts) from the voxel grid, for input_indices
+    _voxel_points: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def cluster_sizes(self) -> list[int]:
@@ -128,9 +132,11 @@ class SegmentationResult:
         idx = self.cluster_indices[cluster]
         if self.point_voxel is None:
             return idx
-        mask = np.zeros(self.segmented_cloud.n_points, bool)
-        mask[idx] = True
-        return np.flatnonzero(mask[self.point_voxel]).astype(np.int64)
+        if self._voxel_points is not None and 16 * len(idx) < len(self.point_voxel):
+            packed, start = self._voxel_points  # small cluster: gather its points, sort them
+            if 16 * int((start[idx + 1] - start[idx]).sum()) < len(self.point_voxel):
+                return _voxel_kernels.points_of_voxels(packed, start, idx)
+        return _voxel_kernels.points_in_voxels(self.point_voxel, idx, self.segmented_cloud.n_points)
 
     def to_dict(self) -> dict:
         return {
@@ -182,16 +188,18 @@ def segment_scene(
     t_start = t0 = time.perf_counter()
 
     point_voxel = None
+    voxel_points = None
     seg_cloud = cloud
     if cfg.voxel_leaf_m is not None and cloud.n_points:
-        grid = voxel_grid(cloud.points_xyz_m, cfg.voxel_leaf_m)
+        # the cloud was validated on construction: skip the public functions' re-validation
+        grid, intensity, voxel_points = _voxel_grid(
+            cloud.points_xyz_m, float(cfg.voxel_leaf_m), False, cloud.intensity
+        )
         point_voxel = grid.point_voxel
-        intensity = None
-        if cloud.intensity is not None:
-            intensity = (
-                np.bincount(grid.point_voxel, weights=cloud.intensity, minlength=grid.n_voxels)
-                / grid.counts
-            )
+        # fresh arrays owned by this result: read-only up front so PointCloud does not copy them
+        grid.points_xyz_m.setflags(write=False)
+        if intensity is not None:
+            intensity.setflags(write=False)
         seg_cloud = PointCloud(
             grid.points_xyz_m,
             intensity=intensity,
@@ -203,20 +211,25 @@ def segment_scene(
     t0 = time.perf_counter()
     pts = seg_cloud.points_xyz_m
     planes: list[PlaneModel] = []
-    remaining = np.arange(len(pts), dtype=np.int64)
+    remaining = None
     if len(pts) == 0:
         notes.append("empty input cloud: nothing to segment")
     elif cfg.max_planes > 0:
         try:
-            removal = remove_dominant_planes(
+            n = len(pts)
+            removal = _remove_planes(
                 pts,
-                distance_threshold_m=cfg.distance_threshold_m,
-                max_planes=cfg.max_planes,
-                min_inliers=cfg.min_plane_inliers,
-                confidence=cfg.plane_confidence,
-                max_iterations=cfg.plane_max_iterations,
-                n_pretest=cfg.plane_n_pretest,
-                seed=seed,
+                float(cfg.distance_threshold_m),
+                cfg.max_planes,
+                max(3, math.ceil(0.05 * n))
+                if cfg.min_plane_inliers is None
+                else cfg.min_plane_inliers,
+                False,
+                float(cfg.plane_confidence),
+                cfg.plane_max_iterations,
+                cfg.plane_n_pretest,
+                as_rng(seed, caller="segment_scene"),
+                "remove_dominant_planes",
             )
             planes, remaining = removal.planes, removal.remaining_indices
             if len(planes) < cfg.max_planes:
@@ -225,6 +238,8 @@ def segment_scene(
                 )
         except SegmentationError as exc:
             notes.append(f"no plane removed: {exc}")
+    if remaining is None:
+        remaining = np.arange(len(pts), dtype=np.int64)
     timings["planes"] = (time.perf_counter() - t0) * 1e3
 
     t0 = time.perf_counter()
@@ -232,11 +247,11 @@ def segment_scene(
     if len(pts) and len(remaining) == 0:
         notes.append("no points left after plane removal: no clusters")
     elif len(remaining):
-        local = extract_euclidean_clusters(
-            pts[remaining],
-            tolerance_m=cfg.cluster_tolerance_m,
-            min_size=cfg.min_cluster_size,
-            max_size=cfg.max_cluster_size,
+        local = _clusters(
+            pts if len(remaining) == len(pts) else pts[remaining],
+            float(cfg.cluster_tolerance_m),
+            cfg.min_cluster_size,
+            cfg.max_cluster_size,
         )
         cluster_indices = [remaining[c] for c in local]
         if not cluster_indices:
@@ -257,4 +272,5 @@ def segment_scene(
         len(remaining),
         timings,
         notes,
+        voxel_points,
     )

@@ -13,6 +13,12 @@ arithmetic, and then the voxel counts agree exactly (tests/test_voxel.py); centr
 means (they differ from PCL's float32 sums by ~1e-7 relative). PCL also refuses to filter (returns
 the input) when the grid has more than 2**31 voxels; we use 64-bit keys and fall back to a
 row-wise sort when even those would overflow.
+
+Implementation (``_voxel_kernels``): one pass computes every point's key and packs it with the
+point index in one int64 (``key << 32 | index``); a stable LSD radix sort orders the words; the
+voxel of each point is read off the sorted words, and one sequential pass over the points sums
+each voxel in input order (so centroids equal a plain per-voxel mean in input order, bit for bit).
+Grids of more than 2**31 voxels sort (key, index) pairs instead.
 """
 
 from __future__ import annotations
@@ -73,22 +79,55 @@ def voxel_grid(
     """
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller="voxel_grid")
     leaf = check_positive("leaf_m", leaf_m, caller="voxel_grid")
+    return _voxel_grid(pts, leaf, bool(pcl_rounding))[0]
+
+
+_NO_VALUES = np.zeros(0)
+
+
+def _voxel_grid(
+    pts: np.ndarray, leaf: float, pcl_rounding: bool, values: np.ndarray | None = None
+) -> tuple[VoxelGridResult, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+    """:func:`voxel_grid` on validated input (C-contiguous finite float64 (N, 3), leaf > 0); the
+    per-voxel mean (M,) of the optional per-point ``values`` (N,) float64 (None when not given),
+    equal to ``np.bincount(point_voxel, weights=values) / counts`` bit for bit; and the points of
+    each voxel as ``(packed, start)`` for ``_voxel_kernels.points_of_voxels`` (None on the
+    fallback paths)."""
     if len(pts) == 0:
-        return VoxelGridResult(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), leaf)
-    ijk, lo, hi = _k.voxel_coords(pts, leaf, bool(pcl_rounding))
+        empty = VoxelGridResult(
+            np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), leaf
+        )
+        return empty, (None if values is None else np.zeros(0)), None
+    lo, hi = _k.coord_bounds(pts, leaf, pcl_rounding)
     extent = hi - lo + 1.0  # voxels per axis (float: may exceed int64)
-    if float(np.prod(extent)) < 2.0**62:
+    n_keys = float(np.prod(extent))
+    if n_keys <= 2.0**31 and len(pts) < 2**32:  # key and point index packed in one int64
+        packed = _k.sorted_packed_keys(
+            pts, leaf, pcl_rounding, lo, int(extent[0]), int(extent[1]), int(n_keys) - 1
+        )
+        centroids, counts, inverse, means, start = _k.centroids_from_packed(
+            pts, _NO_VALUES if values is None else values, packed
+        )
+        result = VoxelGridResult(centroids, inverse, counts, leaf)
+        return result, (None if values is None else means), (packed, start)
+    if n_keys < 2.0**62:
+        ijk, lo, _ = _k.voxel_coords(pts, leaf, pcl_rounding)
         keys = _k.packed_keys(ijk, lo, int(extent[0]), int(extent[1]))
-        order, sorted_keys = _k.radix_argsort(keys, int(float(np.prod(extent))) - 1)  # stable
+        order, sorted_keys = _k.radix_argsort(keys, int(n_keys) - 1)  # stable
         centroids, counts, inverse = _k.centroids_from_order(pts, sorted_keys, order)
     else:  # astronomically sparse grid: sort rows (k, j, i) instead of packed keys
+        ijk, _, _ = _k.voxel_coords(pts, leaf, pcl_rounding)
         _, inverse, counts = np.unique(
             ijk[:, ::-1], axis=0, return_inverse=True, return_counts=True
         )
         inverse = inverse.reshape(-1).astype(np.int64)
         centroids = np.stack([np.bincount(inverse, weights=pts[:, a]) for a in range(3)], axis=1)
         centroids /= counts[:, None]
-    return VoxelGridResult(centroids, inverse, counts.astype(np.int64), leaf)
+    result = VoxelGridResult(centroids, inverse, counts.astype(np.int64), leaf)
+    if values is None:
+        return result, None, None
+    means = np.bincount(inverse, weights=values, minlength=len(counts)) / result.counts
+    return result, means, None
 
 
 def voxel_downsample(
