@@ -13,7 +13,7 @@ Run directory layout (every file written atomically)::
       recognition.json     every cluster of every scan against the ground truth, pose errors, timings
       fig3_scan.npz        the scan drawn in Fig. 3 (points, cluster labels)
       consensus.json       the observations behind the first landmark's initialisation
-      slam/<mode>/         trajectory.csv, landmarks.csv, updates.csv, metrics.json, config.json per mode
+      slam/<mode>/         trajectory.csv, trajectory_smoothed.csv, landmarks.csv, updates.csv, metrics.json, config.json per mode
       metrics.json         the headline metrics of every stage
       figures/*.png        every figure of the report
       report.html          one self-contained page (figures embedded)
@@ -380,6 +380,8 @@ def _headline_metrics(evaluations: dict, recognition: dict, slam_results: dict) 
     for mode, res in slam_results.items():
         m = res.metrics
         slam[mode] = {k: m[k] for k in m if not isinstance(m[k], (list, dict)) or k in ("landmarks",)}
+        sm = m.get("smoother") or {}
+        slam[mode]["smoothed_ate_rmse_m"] = sm.get("ate_rmse_m")
     return {
         "leave_one_out": {k: {"accuracy": v.accuracy, "recall": v.recall} for k, v in evaluations.items()},
         "recognition": recognition,

@@ -48,10 +48,10 @@ def summary_text(metrics: dict) -> str:
     slam = metrics.get("slam", {})
     if slam:
         lines.append("")
-        lines.append(f"{'mode':<14}{'ATE RMSE [m]':>14}{'final err [m]':>15}{'landmarks':>11}")
+        lines.append(f"{'mode':<14}{'ATE RMSE [m]':>14}{'smoothed [m]':>14}{'final err [m]':>15}{'landmarks':>11}")
         for mode, m in slam.items():
-            lines.append(f"{mode:<14}{_f(m.get('ate_rmse_m')):>14}{_f(m.get('final_position_error_m')):>15}"
-                         f"{str(m.get('n_landmarks', '')):>11}")
+            lines.append(f"{mode:<14}{_f(m.get('ate_rmse_m')):>14}{_f(m.get('smoothed_ate_rmse_m')):>14}"
+                         f"{_f(m.get('final_position_error_m')):>15}{str(m.get('n_landmarks', '')):>11}")
     t = metrics.get("timings_s", {})
     if t:
         lines.append("")

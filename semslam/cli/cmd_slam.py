@@ -39,6 +39,10 @@ def register(subparsers, common) -> None:
                         "e.g. reducing_socket_0); repeatable")
     q.add_argument("--white-dvl", action="store_true",
                    help="missions with a white-noise-only DVL (no scale factor, misalignment or biases)")
+    q.add_argument("--launch-sigma", type=float, default=None, metavar="M",
+                   help="standard deviation (m, per axis) of the launch point, which defines the world frame "
+                        "(default: SlamConfig's, 0.001)")
+    q.add_argument("--no-smooth", action="store_true", help="skip the RTS-smoothed trajectories")
     q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves")
     q.set_defaults(func=run_montecarlo_cmd)
 
@@ -110,11 +114,20 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     from ._output import emit
 
     modes = MODES if args.mode == "all" else (args.mode,)
+    overrides: dict = {}
+    if args.surveyed:
+        overrides["surveyed_objects"] = tuple(args.surveyed)
+    if args.launch_sigma is not None:
+        if not (args.launch_sigma > 0 and args.launch_sigma < float("inf")):
+            raise InputError(f"The '--launch-sigma' option must be a positive number of metres. Got {args.launch_sigma!r} instead.")
+        overrides["initial_position_sigma_m"] = float(args.launch_sigma)
+    if args.no_smooth:
+        overrides["smooth"] = False
     res = run_montecarlo(args.runs, modes=modes, yaw_bias_deg=args.yaw_bias_deg, seed=args.seed, source=args.source,
                          loops=args.loops, progress=None if getattr(args, "json", False) else
                          (lambda s: print(s, file=sys.stderr)), yaw_bias_walk_deg_per_sqrt_s=args.yaw_bias_walk,
                          white_dvl=args.white_dvl,
-                         config_overrides={"surveyed_objects": tuple(args.surveyed)} if args.surveyed else None)
+                         config_overrides=overrides or None)
     if args.out:
         write_montecarlo(res, args.out)
     emit(args, {"n_runs": res.n_runs, "summary": res.summary}, res.table)

@@ -84,6 +84,8 @@ class SemanticEkf:
         self.landmarks: list[LandmarkInfo] = []
         self._N: np.ndarray | None = None
         self._q_cache: dict = {}
+        #: optional :class:`~semslam.slam.smoother.RtsRecorder`, told of every transition and update
+        self.recorder = None
         self._set_active(np.arange(self.n_v))
 
     # ------------------------------------------------------------------ observability constraint
@@ -242,6 +244,8 @@ class SemanticEkf:
         if dt_s <= 0.0:
             return
         R = self.true_attitude(R_wv_ahrs)
+        if self.recorder is not None:
+            self.recorder.before_transition(self)
         att = np.zeros((3, 3)) if attitude_cov_world is None else attitude_cov_world
         a = float(np.exp(-dt_s / self.dvl_bias_tau_s))
         a2 = float(np.exp(-dt_s / self.dvl_slope_bias_tau_s))
@@ -260,6 +264,17 @@ class SemanticEkf:
             self._dirty = True
         if self._N is not None:
             self._N[:self.n_v] = F @ self._N[:self.n_v]
+        if self.recorder is not None:
+            self.recorder.compose(F, rows=self.n_v)
+
+    def inflate(self, idx, Q: np.ndarray) -> None:
+        """Add ``Q`` to the covariance block of the active global indices ``idx`` (an extra process noise)."""
+        if self.recorder is not None:
+            self.recorder.before_transition(self)
+        loc = self._loc[np.asarray(idx, dtype=np.intp)]
+        if (loc < 0).any():
+            raise SlamError("SemanticEkf.inflate touches a passive state; call set_active_landmarks first.")
+        self.Paa[np.ix_(loc, loc)] += Q
 
     # ------------------------------------------------------------------ updates
     def innovation_cov(self, idx, Hc: np.ndarray, Rn: np.ndarray) -> np.ndarray:
@@ -276,6 +291,8 @@ class SemanticEkf:
         loc = self._loc[np.asarray(idx, dtype=np.intp)]
         if (loc < 0).any():
             raise SlamError("SemanticEkf.update touches a passive state; call set_active_landmarks first.")
+        if self.recorder is not None:
+            self.recorder.before_update(self)
         if self._N is not None:
             u = self._N[np.asarray(idx, dtype=np.intp)]
             uu = float(u @ u)
@@ -310,6 +327,11 @@ class SemanticEkf:
         if np.abs(ang).max() <= np.pi / 2 or (np.abs(ang[:, 1]).max() <= np.pi / 2 and np.abs(ang).max() < np.pi):
             return
         over = np.abs(ang[:, 1]) > np.pi / 2
+        if self.recorder is not None and over.any():
+            self.recorder.before_transition(self)
+            J = np.ones(self.n)
+            J[self._A[nv + 6 * np.flatnonzero(over) + 4]] = -1.0
+            self.recorder.compose(np.diag(J))
         for j in np.flatnonzero(over):  # pitch beyond +-90 deg: same rotation, pitch mirrored
             ang[j] = [ang[j, 0] + np.pi, np.pi - ang[j, 1], ang[j, 2] + np.pi]
             r = nv + 6 * j + 4
@@ -328,6 +350,8 @@ class SemanticEkf:
         measurement part; the new landmark gets the full cross-covariance ``G P_v,:`` with the vehicle and
         every landmark. Returns the landmark id.
         """
+        if self.recorder is not None:
+            self.recorder.before_transition(self)
         self.flush()
         n, nv = self.n, self.n_v
         G = np.asarray(G_vehicle, dtype=float)
@@ -344,11 +368,18 @@ class SemanticEkf:
             self._N = np.concatenate([self._N, G @ self._N[:nv]])
         self.landmarks.append(LandmarkInfo(label, n, stamp_s, stamp_s, 0, name))
         self._set_active(np.concatenate([self._A, n + np.arange(6)]))
+        if self.recorder is not None:
+            F = np.zeros((n + 6, n))
+            F[:n] = np.eye(n)
+            F[n:, :nv] = G
+            self.recorder.compose(F)
         return len(self.landmarks) - 1
 
     def add_prior_landmarks(self, poses_xyzrpy: np.ndarray, covs: np.ndarray, labels, *, stamp_s: float = 0.0,
                             names=None) -> list[int]:
         """Add landmarks known a priori (a surveyed map), independent of the vehicle. They start passive."""
+        if self.recorder is not None:
+            self.recorder.before_transition(self)
         self.flush()
         poses = np.asarray(poses_xyzrpy, dtype=float).reshape(-1, 6)
         m, n = len(poses), self.n
@@ -366,6 +397,8 @@ class SemanticEkf:
                                                "" if names is None else names[j]))
             ids.append(len(self.landmarks) - 1)
         self._set_active(self._A)
+        if self.recorder is not None:
+            self.recorder.compose(np.eye(n + 6 * m, n))
         return ids
 
 

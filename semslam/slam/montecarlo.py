@@ -63,8 +63,9 @@ class MonteCarloResult:
     def table(self) -> str:
         """Markdown table of the summary."""
         rows = ["| mode | ATE mean (m) | ATE max (m) | DR/mode ATE | final err (m) | 3-sigma at 1/3, 2/3, end (m) | "
-                "ANEES | band | epochs in band | landmark ANEES pos (band) | landmark ANEES pose (band) |",
-                "|---|---|---|---|---|---|---|---|---|---|---|"]
+                "ANEES | band | epochs in band | landmark ANEES pos (band) | landmark ANEES pose (band) | "
+                "smoothed ATE mean (m) | smoothed DR/mode | smoothed epochs in band |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
         def lm(s, key):
             v = s[key]
@@ -78,7 +79,7 @@ class MonteCarloResult:
                         f"{'-' if ratio is None else f'{ratio:.2f}'} | {s['final_error_mean_m']:.4f} | {s3} | "
                         f"{s['anees_mean']:.2f} | [{s['band'][0]:.2f}, {s['band'][1]:.2f}] | "
                         f"{100 * s['fraction_in_band']:.0f} % | {lm(s, 'landmark_nees_position')} | "
-                        f"{lm(s, 'landmark_nees_pose')} |")
+                        f"{lm(s, 'landmark_nees_pose')} | {_smoothed_cells(s)} |")
         return "\n".join(rows)
 
 
@@ -100,6 +101,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
         if mode not in MODES:
             raise SlamError(f"The 'modes' argument of run_montecarlo must contain only {MODES}. Got {mode!r} instead.")
     nees_r: dict = {m: [] for m in modes}
+    nees_s: dict = {m: [] for m in modes}
     sig_r: dict = {m: [] for m in modes}
     err_r: dict = {m: [] for m in modes}
     met: dict = {m: [] for m in modes}
@@ -115,6 +117,9 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
                 raise SlamError("Monte-Carlo runs need missions with ground truth.")
             e = res.position_ned_m - res.truth_position_ned_m
             nees_r[mode].append(nees(e, res.position_cov_m2))
+            if res.smoothed_position_ned_m is not None:
+                nees_s[mode].append(nees(res.smoothed_position_ned_m - res.truth_position_ned_m,
+                                         res.smoothed_position_cov_m2))
             sig_r[mode].append(3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)))
             err_r[mode].append(np.linalg.norm(e, axis=1))
             met[mode].append(res.metrics)
@@ -145,11 +150,28 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
             "landmark_nees_pose": _landmark_anees([m.get("landmark_nees_pose", []) for m in met[mode]], 6),
             "dvl_rejected_mean": float(np.mean([m.get("dvl_rejected", 0) for m in met[mode]])),
         }
+        smoothed = [m.get("smoother", {}).get("ate_rmse_m") for m in met[mode]]
+        if nees_s[mode] and len(nees_s[mode]) == n_runs and all(v is not None for v in smoothed):
+            a_s = anees(np.array([v[:K] for v in nees_s[mode]]), 3)
+            summary[mode]["smoothed"] = {"ate_rmse_mean_m": float(np.mean(smoothed)),
+                                         "ate_rmse_max_m": float(np.max(smoothed)),
+                                         "anees_mean": a_s["anees_mean"], "fraction_in_band": a_s["fraction_in_band"]}
     if "dr" in summary:
         for mode in modes:
             summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(summary[mode]["ate_rmse_mean_m"], 1e-12)
+            if "smoothed" in summary[mode] and "smoothed" in summary["dr"]:
+                summary[mode]["smoothed"]["dr_over_mode_ate"] = (summary["dr"]["smoothed"]["ate_rmse_mean_m"]
+                                                                 / max(summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12))
     return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
                             {m: out[m][2] for m in modes}, met, summary)
+
+
+def _smoothed_cells(s: dict) -> str:
+    sm = s.get("smoothed")
+    if not sm:
+        return "- | - | -"
+    r = sm.get("dr_over_mode_ate")
+    return f"{sm['ate_rmse_mean_m']:.4f} | {'-' if r is None else f'{r:.2f}'} | {100 * sm['fraction_in_band']:.0f} %"
 
 
 def _landmark_anees(per_run: list, dof: int) -> dict:
