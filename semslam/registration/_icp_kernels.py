@@ -11,7 +11,7 @@ criteria (section 4 of ``design/pcl-algorithms.md``) end the loop on an incremen
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy.spatial import cKDTree
 
 from ._coarse_kernels import umeyama_batch
@@ -121,8 +121,9 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
     which matters for the separation of the search's hypotheses), minimised by Levenberg-Marquardt on a right
     perturbation ``T <- T Exp(delta)``, ``delta = (phi, rho)`` in the source frame, damping 1e-3 divided
     (multiplied) by 10 after an accepted (rejected) step, a step accepted when it decreases the error of the
-    iteration's pairs; stops when
-    ``|phi| < rot_eps`` and ``|rho| < trans_eps``, or after ``max_iterations``.
+    iteration's pairs (the damped 6x6 system solved by Cholesky, LU when not numerically positive definite;
+    no allocation per step); stops when ``|phi| < rot_eps`` and ``|rho| < trans_eps``, or after
+    ``max_iterations``.
     Returns ``(T, iterations, converged, n_pairs)``.
     """
     T = T0.copy()
@@ -137,6 +138,9 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
     g = np.empty(6)
     J = np.empty(6)
     A = np.empty((6, 6))
+    delta = np.zeros(6)
+    E = np.empty((4, 4))
+    T_new = np.empty((4, 4))
     for it in range(max_iterations):
         n_pairs = _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair)
         H[:] = 0.0
@@ -165,15 +169,16 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
             for v in range(u):
                 H[u, v] = H[v, u]
         success = False
-        delta = np.zeros(6)
         for _ in range(10):
             A[:] = H
             for u in range(6):
                 A[u, u] += lam
-            delta = -np.linalg.solve(A, g)
-            T_new = T @ _exp_se3(delta)
+            if not _solve_spd6(A, g, delta):  # not numerically positive definite: LU
+                delta[:] = -np.linalg.solve(A, g)
+            _exp_se3_into(delta, E)
+            _matmul44(T, E, T_new)
             if _plane_error(src, T_new, model_pts, model_nrm, pair) < e:
-                T = T_new
+                T, T_new = T_new, T
                 lam /= 10.0
                 success = True
                 converged = (np.sqrt(delta[0] ** 2 + delta[1] ** 2 + delta[2] ** 2) < rot_eps
@@ -183,6 +188,104 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
         if not success or converged:
             break
     return T, it, converged, n_pairs
+
+
+@njit(cache=True, parallel=True)
+def icp_plane_field_batch(src, T0s, params, index, model_pts, model_nrm, max_corr, max_iterations, rot_eps,
+                          trans_eps):
+    """:func:`icp_plane_field` from each of ``T0s`` (H, 4, 4), the runs spread over the cores (independent:
+    the same results as one call per start). Returns ``(Ts (H, 4, 4), iterations (H,), converged (H,),
+    n_pairs (H,))``."""
+    H = T0s.shape[0]
+    Ts = np.empty((H, 4, 4))
+    its = np.empty(H, np.int64)
+    conv = np.empty(H, np.bool_)
+    n_pairs = np.empty(H, np.int64)
+    for h in prange(H):
+        T, it, c, n = icp_plane_field(src, T0s[h], params, index, model_pts, model_nrm, max_corr, max_iterations,
+                                      rot_eps, trans_eps)
+        Ts[h] = T
+        its[h] = it
+        conv[h] = c
+        n_pairs[h] = n
+    return Ts, its, conv, n_pairs
+
+
+@njit(cache=True)
+def _solve_spd6(A, g, out):
+    """``out = -A^-1 g`` for a symmetric positive definite 6x6 ``A`` by Cholesky (``A`` overwritten by its
+    factor); False (``out`` undefined) when a pivot is not positive."""
+    for j in range(6):
+        d = A[j, j]
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        if not d > 0.0:
+            return False
+        d = np.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, 6):
+            v = A[i, j]
+            for k in range(j):
+                v -= A[i, k] * A[j, k]
+            A[i, j] = v / d
+    for i in range(6):  # L y = -g
+        v = -g[i]
+        for k in range(i):
+            v -= A[i, k] * out[k]
+        out[i] = v / A[i, i]
+    for i in range(5, -1, -1):  # L^T x = y
+        v = out[i]
+        for k in range(i + 1, 6):
+            v -= A[k, i] * out[k]
+        out[i] = v / A[i, i]
+    return True
+
+
+@njit(cache=True)
+def _matmul44(A, B, out):
+    """``out = A @ B`` for 4x4 rigid transforms (last rows [0 0 0 1])."""
+    for i in range(3):
+        for j in range(4):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+        out[i, 3] += A[i, 3]
+    out[3, 0] = out[3, 1] = out[3, 2] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(cache=True)
+def _exp_se3_into(delta, T):
+    """:func:`_exp_se3` written into ``T`` (4, 4) without allocations."""
+    w0, w1, w2 = delta[0], delta[1], delta[2]
+    ang = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    for a in range(4):
+        for b in range(4):
+            T[a, b] = 1.0 if a == b else 0.0
+    if ang >= 1e-12:  # Rodrigues
+        k0, k1, k2 = w0 / ang, w1 / ang, w2 / ang
+        s, c = np.sin(ang), np.cos(ang)
+        C = 1.0 - c
+        T[0, 0] = c + k0 * k0 * C
+        T[0, 1] = k0 * k1 * C - k2 * s
+        T[0, 2] = k0 * k2 * C + k1 * s
+        T[1, 0] = k1 * k0 * C + k2 * s
+        T[1, 1] = c + k1 * k1 * C
+        T[1, 2] = k1 * k2 * C - k0 * s
+        T[2, 0] = k2 * k0 * C - k1 * s
+        T[2, 1] = k2 * k1 * C + k0 * s
+        T[2, 2] = c + k2 * k2 * C
+    # V = I + b K + c K^2 with K = [w]x, K^2 = w w^T - |w|^2 I
+    if ang < 1e-10:
+        b, cc = 0.5, 0.0
+    else:
+        b, cc = (1.0 - np.cos(ang)) / ang ** 2, (ang - np.sin(ang)) / ang ** 3
+    r0, r1, r2 = delta[3], delta[4], delta[5]
+    wr = w0 * r0 + w1 * r1 + w2 * r2
+    ww = w0 * w0 + w1 * w1 + w2 * w2
+    # K r = w x r
+    x0, x1, x2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0
+    T[0, 3] = r0 + b * x0 + cc * (w0 * wr - ww * r0)
+    T[1, 3] = r1 + b * x1 + cc * (w1 * wr - ww * r1)
+    T[2, 3] = r2 + b * x2 + cc * (w2 * wr - ww * r2)
 
 
 @njit(cache=True)

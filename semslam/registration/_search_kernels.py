@@ -56,20 +56,54 @@ def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     source points within that truncation. Returns the fit cost (H,) =
     ``mean_i min(d_i, tau)^2 / tau^2`` in [0, 1] (points outside the field count as ``tau``).
     Hypotheses are independent: they are spread over the cores (same result for any thread count).
+    The cell centres per axis and the offsets times the quantum are tabulated first (the same products
+    and sums as :func:`_cell_nearest`, so the same bits).
     """
-    H, N = Rs.shape[0], src.shape[0]
+    H = Rs.shape[0]
+    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
+    c, qm = origin[3], origin[4]
+    cx, cy, cz = np.empty(nx), np.empty(ny), np.empty(nz)
+    for i in range(nx):
+        cx[i] = origin[0] + (i + 0.5) * c
+    for i in range(ny):
+        cy[i] = origin[1] + (i + 0.5) * c
+    for i in range(nz):
+        cz[i] = origin[2] + (i + 0.5) * c
+    qv = np.empty(256)
+    for o in range(256):
+        qv[o] = (o - 128) * qm
+    flat = nearest.reshape(-1)
     cost = np.empty(H)
     for h in prange(H):
-        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, nearest, truncations, tau_m)
+        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv,
+                                       truncations, tau_m)
     return cost
 
 
+@njit(cache=True, inline="always")
+def _lookup(p0, p1, p2, o0, o1, o2, inv, nx, ny, nz, flat, cx, cy, cz, qv):
+    """:func:`_cell_nearest` on the tables of :func:`align_and_score` (``flat``: the offsets, raveled)."""
+    fi = (p0 - o0) * inv
+    fj = (p1 - o1) * inv
+    fk = (p2 - o2) * inv
+    if fi < 0.0 or fj < 0.0 or fk < 0.0:
+        return -1, 0.0, 0.0, 0.0
+    i, j, k = int(fi), int(fj), int(fk)
+    if i >= nx or j >= ny or k >= nz:
+        return -1, 0.0, 0.0, 0.0
+    b = 3 * ((i * ny + j) * nz + k)
+    a0 = flat[b]
+    if a0 == -128:
+        return -1, 0.0, 0.0, 0.0
+    return 1, cx[i] + qv[a0 + 128], cy[j] + qv[flat[b + 1] + 128], cz[k] + qv[flat[b + 2] + 128]
+
+
 @njit(cache=True)
-def _align_and_score_one(R, t, src, origin, cell_m, nearest, truncations, tau_m):
+def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv, truncations, tau_m):
     """:func:`align_and_score` of one hypothesis (``t`` (3,) updated in place)."""
     N = src.shape[0]
-    nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
     inv = 1.0 / cell_m
+    o0, o1, o2 = origin[0], origin[1], origin[2]
     q = np.empty((N, 3))
     for n in range(N):
         for a in range(3):
@@ -81,7 +115,7 @@ def _align_and_score_one(R, t, src, origin, cell_m, nearest, truncations, tau_m)
         cnt = 0
         for n in range(N):
             p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
-            ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+            ok, x, y, z = _lookup(p0, p1, p2, o0, o1, o2, inv, nx, ny, nz, flat, cx, cy, cz, qv)
             if ok < 0:
                 continue
             d0, d1, d2 = x - p0, y - p1, z - p2
@@ -100,7 +134,7 @@ def _align_and_score_one(R, t, src, origin, cell_m, nearest, truncations, tau_m)
     c = 0.0
     for n in range(N):
         p0, p1, p2 = q[n, 0] + t0, q[n, 1] + t1, q[n, 2] + t2
-        ok, x, y, z = _cell_nearest(p0, p1, p2, origin, inv, nx, ny, nz, nearest)
+        ok, x, y, z = _lookup(p0, p1, p2, o0, o1, o2, inv, nx, ny, nz, flat, cx, cy, cz, qv)
         if ok < 0:
             c += 1.0
         else:
@@ -119,61 +153,75 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     (nu, nv) = smallest observed range around each cell, inf where nothing was observed). It contradicts
     the scan when its cell saw nothing (it should have been seen) or when it lies more than ``tol_m``
     in front of the observed surface (free space).
+
+    Computed in the object frame: with ``c = t + R viewpoint`` (the scanner in the object frame) the ray is
+    ``r = R^T (p_o - c)``, so the facing test is ``n_o . (p_o - c) < 0``, the range ``|p_o - c|`` and the
+    image coordinates ``(F R^T) (p_o - c)``: 3 products per point for the points facing away, 12 for the others.
     """
     H, M = Rs.shape[0], model_pts.shape[0]
     nu, nv = range_min.shape[0], range_min.shape[1]
     out = np.empty(H)
     for h in prange(H):
         R = Rs[h]
+        c0 = ts[h, 0] + R[0, 0] * viewpoint[0] + R[0, 1] * viewpoint[1] + R[0, 2] * viewpoint[2]
+        c1 = ts[h, 1] + R[1, 0] * viewpoint[0] + R[1, 1] * viewpoint[1] + R[1, 2] * viewpoint[2]
+        c2 = ts[h, 2] + R[2, 0] * viewpoint[0] + R[2, 1] * viewpoint[1] + R[2, 2] * viewpoint[2]
+        # G = F R^T
+        g00 = F[0, 0] * R[0, 0] + F[0, 1] * R[0, 1] + F[0, 2] * R[0, 2]
+        g01 = F[0, 0] * R[1, 0] + F[0, 1] * R[1, 1] + F[0, 2] * R[1, 2]
+        g02 = F[0, 0] * R[2, 0] + F[0, 1] * R[2, 1] + F[0, 2] * R[2, 2]
+        g10 = F[1, 0] * R[0, 0] + F[1, 1] * R[0, 1] + F[1, 2] * R[0, 2]
+        g11 = F[1, 0] * R[1, 0] + F[1, 1] * R[1, 1] + F[1, 2] * R[1, 2]
+        g12 = F[1, 0] * R[2, 0] + F[1, 1] * R[2, 1] + F[1, 2] * R[2, 2]
+        g20 = F[2, 0] * R[0, 0] + F[2, 1] * R[0, 1] + F[2, 2] * R[0, 2]
+        g21 = F[2, 0] * R[1, 0] + F[2, 1] * R[1, 1] + F[2, 2] * R[1, 2]
+        g22 = F[2, 0] * R[2, 0] + F[2, 1] * R[2, 1] + F[2, 2] * R[2, 2]
         n_front = 0
         n_bad = 0
         for m in range(M):
-            # p_s = R^T (p_o - t), n_s = R^T n_o
-            a0 = model_pts[m, 0] - ts[h, 0]
-            a1 = model_pts[m, 1] - ts[h, 1]
-            a2 = model_pts[m, 2] - ts[h, 2]
-            r0 = R[0, 0] * a0 + R[1, 0] * a1 + R[2, 0] * a2 - viewpoint[0]
-            r1 = R[0, 1] * a0 + R[1, 1] * a1 + R[2, 1] * a2 - viewpoint[1]
-            r2 = R[0, 2] * a0 + R[1, 2] * a1 + R[2, 2] * a2 - viewpoint[2]
-            n0 = R[0, 0] * model_nrm[m, 0] + R[1, 0] * model_nrm[m, 1] + R[2, 0] * model_nrm[m, 2]
-            n1 = R[0, 1] * model_nrm[m, 0] + R[1, 1] * model_nrm[m, 1] + R[2, 1] * model_nrm[m, 2]
-            n2 = R[0, 2] * model_nrm[m, 0] + R[1, 2] * model_nrm[m, 1] + R[2, 2] * model_nrm[m, 2]
-            if n0 * r0 + n1 * r1 + n2 * r2 >= 0.0:  # facing away from the scanner
+            a0 = model_pts[m, 0] - c0
+            a1 = model_pts[m, 1] - c1
+            a2 = model_pts[m, 2] - c2
+            if model_nrm[m, 0] * a0 + model_nrm[m, 1] * a1 + model_nrm[m, 2] * a2 >= 0.0:  # facing away
                 continue
             n_front += 1
-            z = F[2, 0] * r0 + F[2, 1] * r1 + F[2, 2] * r2
+            z = g20 * a0 + g21 * a1 + g22 * a2
             if z <= 1e-9:
                 n_bad += 1
                 continue
-            u = (F[0, 0] * r0 + F[0, 1] * r1 + F[0, 2] * r2) / z
-            v = (F[1, 0] * r0 + F[1, 1] * r1 + F[1, 2] * r2) / z
-            i = int(np.floor((u - u0) * inv_cell_uv))
-            j = int(np.floor((v - v0) * inv_cell_uv))
-            if i < 0 or j < 0 or i >= nu or j >= nv:
+            u = (g00 * a0 + g01 * a1 + g02 * a2) / z
+            v = (g10 * a0 + g11 * a1 + g12 * a2) / z
+            fi = np.floor((u - u0) * inv_cell_uv)
+            fj = np.floor((v - v0) * inv_cell_uv)
+            if not (fi >= 0.0 and fj >= 0.0 and fi < nu and fj < nv):  # (NaN-safe)
                 n_bad += 1
                 continue
-            ro = range_min[i, j]
-            if not np.isfinite(ro):
-                n_bad += 1
-            elif np.sqrt(r0 * r0 + r1 * r1 + r2 * r2) < ro - tol_m:
+            ro = range_min[int(fi), int(fj)]
+            if not np.isfinite(ro) or np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) < ro - tol_m:
                 n_bad += 1
         out[h] = n_bad / max(n_front, 1)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def grid_nearest(points, model_pts, origin, inv_cell, dims, cell_start, cell_points, bound):
     """Exact nearest model point within ``bound`` of each point (N,): distance (inf beyond) and index
     (``len(model_pts)`` beyond), as ``cKDTree.query(points, k=1, distance_upper_bound=bound)`` returns them
     (same squared-distance arithmetic, so the same bits). The model points are bucketed in cells of edge
     ``1 / inv_cell >= bound`` (``dims`` (3,), ``cell_start`` (C + 1,) CSR offsets into ``cell_points``):
-    the 27 cells around a point's cell hold every candidate."""
+    the 27 cells around a point's cell hold every candidate. The point's own cell is searched first; a
+    neighbouring cell is skipped when its box (grown by 1e-9 m against rounding) is farther than the best
+    squared distance so far, which starts at ``bound^2`` (exact: a skipped cell holds no point as near as the
+    final nearest, so ties are still broken by the smallest index). The points are spread over the cores
+    (independent queries: the same result for any thread count)."""
     n, M = points.shape[0], model_pts.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     dist = np.full(n, np.inf)
     idx = np.full(n, M, np.int64)
     b2 = bound * bound
-    for q in range(n):
+    cell = 1.0 / inv_cell
+    eps = 1e-9
+    for q in prange(n):
         x, y, z = points[q, 0], points[q, 1], points[q, 2]
         fi = np.floor((x - origin[0]) * inv_cell)
         fj = np.floor((y - origin[1]) * inv_cell)
@@ -181,22 +229,53 @@ def grid_nearest(points, model_pts, origin, inv_cell, dims, cell_start, cell_poi
         if fi < -1.0 or fj < -1.0 or fk < -1.0 or fi > nx or fj > ny or fk > nz:
             continue
         ci, cj, ck = int(fi), int(fj), int(fk)
-        best = np.inf
+        # distances of the point to its cell's lower and upper faces, less eps (lower bounds)
+        lx = x - (origin[0] + ci * cell) - eps
+        ly = y - (origin[1] + cj * cell) - eps
+        lz = z - (origin[2] + ck * cell) - eps
+        ux, uy, uz = cell - lx - 2.0 * eps, cell - ly - 2.0 * eps, cell - lz - 2.0 * eps
+        best = b2
         bj = M
-        for i in range(max(ci - 1, 0), min(ci + 2, nx)):
-            for j in range(max(cj - 1, 0), min(cj + 2, ny)):
-                for k in range(max(ck - 1, 0), min(ck + 2, nz)):
-                    c = (i * ny + j) * nz + k
-                    for s in range(cell_start[c], cell_start[c + 1]):
-                        m = cell_points[s]
-                        d0 = x - model_pts[m, 0]
-                        d1 = y - model_pts[m, 1]
-                        d2 = z - model_pts[m, 2]
-                        dd = d0 * d0 + d1 * d1 + d2 * d2
-                        if dd < best or (dd == best and m < bj):
-                            best = dd
-                            bj = m
-        if best < b2:
+        for pass_ in range(2):  # 0: the own cell; 1: its 26 neighbours (pruned)
+            for i in range(max(ci - 1, 0), min(ci + 2, nx)):
+                gx = 0.0 if i == ci else (lx if i < ci else ux)
+                gx = max(gx, 0.0)
+                for j in range(max(cj - 1, 0), min(cj + 2, ny)):
+                    gy = 0.0 if j == cj else (ly if j < cj else uy)
+                    gy = max(gy, 0.0)
+                    for k in range(max(ck - 1, 0), min(ck + 2, nz)):
+                        own = i == ci and j == cj and k == ck
+                        if own != (pass_ == 0):
+                            continue
+                        if not own:
+                            gz = 0.0 if k == ck else (lz if k < ck else uz)
+                            gz = max(gz, 0.0)
+                            if gx * gx + gy * gy + gz * gz > best:
+                                continue
+                        c = (i * ny + j) * nz + k
+                        for s in range(cell_start[c], cell_start[c + 1]):
+                            m = cell_points[s]
+                            d0 = x - model_pts[m, 0]
+                            d1 = y - model_pts[m, 1]
+                            d2 = z - model_pts[m, 2]
+                            dd = d0 * d0 + d1 * d1 + d2 * d2
+                            if dd < best or (dd == best and m < bj):
+                                best = dd
+                                bj = m
+        if bj < M and best < b2:
             dist[q] = np.sqrt(best)
             idx[q] = bj
     return dist, idx
+
+
+@njit(cache=True)
+def range_image(ij, rng, nu, nv, dilate):
+    """Smallest range (nu, nv) over the (2 dilate + 1)^2 cells around each cell (inf where none): the
+    scatter-min of ``rng`` (N,) at the cells ``ij`` (N, 2) followed by a min-dilation, in one pass."""
+    img = np.full((nu, nv), np.inf)
+    for n in range(ij.shape[0]):
+        r = rng[n]
+        for i in range(max(ij[n, 0] - dilate, 0), min(ij[n, 0] + dilate + 1, nu)):
+            for j in range(max(ij[n, 1] - dilate, 0), min(ij[n, 1] + dilate + 1, nv)):
+                img[i, j] = min(img[i, j], r)
+    return img

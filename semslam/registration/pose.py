@@ -1,6 +1,6 @@
 """Pose of a recognised object: a global search over a deterministic SO(3) grid scored with the model's
-distance field and a visibility (free-space) term (:mod:`.search`; ranked coarse to fine: 1024 then the
-children of the best 128 in the 4096 grid), point-to-plane ICP of the best distinct hypotheses (numba, on
+distance field and a visibility (free-space) term (:mod:`.search`; ranked coarse to fine: 512 then the
+children of the best 64 in the 4096 grid), point-to-plane ICP of the best distinct hypotheses (numba, on
 the distance field's nearest-point candidates: :func:`._icp_kernels.icp_plane_field`), selection by the same
 score after ICP, then the orientation canonicalised under the object's symmetry and a 6x6 covariance (order
 x y z roll pitch yaw, see :mod:`.covariance`).
@@ -30,10 +30,9 @@ from ..geometry import RigidTransform
 from ..symmetry import Symmetry
 from .coarse import align_prerejective
 from .covariance import point_to_plane_information, tangent_covariance, xyz_rpy_covariance_of_inverse
-from ._icp_kernels import icp_plane_field
+from ._icp_kernels import icp_plane_field, icp_plane_field_batch
 from .icp import ICP_METHODS, IcpTarget, align_icp, prepare_icp_target
-from .icp import _result as _icp_result
-from .result import RegistrationResult
+from .result import RegistrationResult, _inlier_statistics_of_distances
 from .search import (DistanceField, RadiusGrid, RangeImage, RotationHierarchy, rotation_distances, search_hypotheses,
                      so3_grid)
 
@@ -67,14 +66,19 @@ class PoseConfig:
     image_cell_m: float = 0.008
     #: Coarse-to-fine ranking: a grid of ``n_coarse_rotations`` is ranked first, and only the fine-grid
     #: children of its ``n_coarse_keep`` best orientations are ranked next (0 = rank the whole fine grid).
-    n_coarse_rotations: int = 1024
-    n_coarse_keep: int = 128
+    #: 512 / 64 (was 1024 / 128: the same ~512 fine orientations ranked, half the coarse pass) with
+    #: ``n_candidates`` 96 (was 128): benchmarks/pose_accuracy.py --models pipeline unchanged (2.20 deg /
+    #: 1.83 mm / 95.1 % / NEES 6.23 against 2.21 / 1.83 / 95.1 / 6.27; the same wrong and flagged counts;
+    #: seeds 3 4 5: 2.91 / 1.79 / 95.1 / 6.19 against 2.91 / 1.72 / 95.1 / 6.07), ~15 % less pose CPU time.
+    n_coarse_rotations: int = 512
+    n_coarse_keep: int = 64
     #: Cluster points used to rank every grid orientation (the first, coarse pass of the search).
     n_coarse_points: int = 32
     #: Best orientations of the coarse pass fitted again with every search point and given the visibility term.
     #: 128 (was 256) with ``n_refine`` 3 (was 4): benchmarks/pose_accuracy.py --models pipeline unchanged within
-    #: noise (2.21 deg / 1.83 mm / 95.1 % / NEES 6.27 against 2.20 / 1.90 / 95.1 / 6.30), ~20 % less pose time.
-    n_candidates: int = 128
+    #: noise (2.21 deg / 1.83 mm / 95.1 % / NEES 6.27 against 2.20 / 1.90 / 95.1 / 6.30), ~20 % less pose time;
+    #: then 96 (see ``n_coarse_rotations``; 64 leaves one more wrong pose unflagged).
+    n_candidates: int = 96
     #: Distinct grid hypotheses refined by ICP and compared by their final score.
     n_refine: int = 3
     #: Voxel leaf of the cluster and model for the features and the RANSAC (``coarse_method="ransac"``).
@@ -395,7 +399,7 @@ def estimate_object_pose(
         raise RegistrationError(f"The cluster given to {_CALLER} has {len(cluster)} points; at least "
                                 f"{cfg.min_points} are needed (PoseConfig.min_points).")
     t1 = time.perf_counter()
-    margin, vis, extras = float("nan"), float("nan"), {}
+    margin, vis, extras, nearest = float("nan"), float("nan"), {}, None
     if init_T_scanner_object is not None:
         T_prior = init_T_scanner_object if isinstance(init_T_scanner_object, RigidTransform) else \
             RigidTransform(init_T_scanner_object)
@@ -409,11 +413,11 @@ def estimate_object_pose(
         extras = {"coarse": coarse.to_dict(), "n_voxels": n_voxels}
         t3 = time.perf_counter()
     else:
-        fine, vis, margin, extras, t2 = _grid_search(cluster, vp, model, cfg, sym)
+        fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym)
         coarse_ok, coarse_fitness = True, extras["coarse_fitness"]
         t3 = time.perf_counter()
     T_os = fine.T_target_source.matrix  # T_object_scanner
-    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference)
+    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference, nearest)
     T_so_can = cov[1]
     cov = cov[0]
     t4 = time.perf_counter()
@@ -467,17 +471,25 @@ def _icp_field_run(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: n
                            int(cfg.icp_max_iterations), 1e-4, 1e-5)
 
 
-def _icp_field_T(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray, max_corr: float) -> np.ndarray:
-    """``T_object_scanner`` (4, 4) after point-to-plane ICP on the distance field's nearest points (numba)."""
-    return _icp_field_run(src, model, cfg, T_init, max_corr)[0]
-
-
-def _icp_field(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray,
-               max_corr: float) -> RegistrationResult:
-    """:func:`_icp_field_T` with fitness and RMSE on the exact KD-tree."""
+def _icp_field_nearest(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray, max_corr: float):
+    """Point-to-plane ICP on the distance field's nearest points (numba) as a RegistrationResult, and the
+    exact nearest model points of the aligned source (``(p, d, j)``: aligned points (N, 3), distances (N,)
+    inf beyond ``max_corr``, rows of ``icp_target``), which the covariance reuses. Fitness and RMSE are
+    :func:`.result.inlier_statistics`'s (the radius grid returns the KD-tree's distances)."""
     t0 = time.perf_counter()
     T, n_it, converged, _ = _icp_field_run(src, model, cfg, T_init, max_corr)
-    return _icp_result(src, model.icp_target, T, n_it, converged, max_corr, t0, time.perf_counter(), {})
+    t1 = time.perf_counter()
+    U, _, Vt = np.linalg.svd(T[:3, :3])  # as .icp._result
+    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    T[3] = [0.0, 0.0, 0.0, 1.0]
+    p = src @ T[:3, :3].T + T[:3, 3]
+    d, j = _nearest(model, p, max_corr)
+    fitness, rmse, n_in = _inlier_statistics_of_distances(d, max_corr)
+    res = RegistrationResult(
+        T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=n_it,
+        converged=converged, n_inliers=n_in, max_correspondence_m=max_corr, method="plane_icp",
+        timings_ms={"icp": 1e3 * (t1 - t0), "total": 1e3 * (time.perf_counter() - t0)}, extras={})
+    return res, (p, d, j)
 
 
 def _final_score(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,
@@ -491,8 +503,26 @@ def _final_score(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: 
     return fit, vis
 
 
+def _final_scores(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig,
+                  Ts: list) -> list[tuple[float, float]]:
+    """:func:`_final_score` of each of ``Ts`` (the same numbers), with one nearest-point and one visibility call."""
+    if not Ts:
+        return []
+    n = len(cluster)
+    p = np.vstack([cluster @ T[:3, :3].T + T[:3, 3] for T in Ts])
+    d = _nearest(model, p, cfg.fit_tau_m)[0]
+    tau = cfg.fit_tau_m
+    Rs = np.stack([T[:3, :3] for T in Ts])
+    ts = np.stack([T[:3, 3] for T in Ts])
+    vis = image.visibility_cost(Rs, ts, model.visibility_points, model.visibility_normals, cfg.visibility_tol_m)
+    return [(float(np.mean(np.minimum(d[k * n:(k + 1) * n], tau) ** 2)) / tau ** 2, float(vis[k]))
+            for k in range(len(Ts))]
+
+
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
-    """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score."""
+    """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
+    RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
+    model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
     from ..segmentation.voxel import voxel_downsample
 
     if model.distance_field is None:
@@ -508,24 +538,32 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=model.rotation_hierarchy,
         n_coarse_keep=cfg.n_coarse_keep)
     t2 = time.perf_counter()
-    refined = []
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m
     sg_pts = None
-    for h in hyps:  # ICP of the search points (fast), scored on the whole cluster
-        if field_icp:
-            T = _icp_field_T(pts, model, cfg, h.T_object_scanner, wide)
-        elif model.icp_target.method in ("plane", "point"):  # small_gicp directly: one source cloud, no statistics
+    Ts = []
+    if field_icp and hyps:  # ICP of the search points (fast), the hypotheses on both cores
+        f = model.distance_field
+        Ts = list(icp_plane_field_batch(
+            np.ascontiguousarray(pts, dtype=np.float64), np.stack([h.T_object_scanner for h in hyps]), f.params,
+            f.index, model.icp_target.points_xyz_m, model.normals_object, float(wide), int(cfg.icp_max_iterations),
+            1e-4, 1e-5)[0])
+    for h in hyps if not field_icp else ():
+        if model.icp_target.method in ("plane", "point"):  # small_gicp directly: one source cloud, no statistics
             sg_pts = small_gicp.PointCloud(np.ascontiguousarray(pts, dtype=np.float64)) if sg_pts is None else sg_pts
-            T = _small_gicp_T(sg_pts, model, cfg, h.T_object_scanner, wide)
+            Ts.append(_small_gicp_T(sg_pts, model, cfg, h.T_object_scanner, wide))
         else:
-            T = _icp_small_gicp(pts, model, cfg, h.T_object_scanner, wide).T_target_source.matrix
-        fit, vis = _final_score(cluster, image, model, cfg, T)
-        refined.append((fit + cfg.visibility_weight * vis, fit, vis, T, h))
+            Ts.append(_icp_small_gicp(pts, model, cfg, h.T_object_scanner, wide).T_target_source.matrix)
+    # scored on the whole cluster
+    refined = [(fit + cfg.visibility_weight * vis, fit, vis, T, h)
+               for (fit, vis), T, h in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps)]
     refined.sort(key=lambda x: x[0])
     best = refined[0]
-    icp = _icp_field if field_icp else _icp_small_gicp
-    final = icp(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
+    nearest = None
+    if field_icp:
+        final, nearest = _icp_field_nearest(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
+    else:
+        final = _icp_small_gicp(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
     Tb = best[3]
     margin = float("inf")
     for other in refined[1:]:
@@ -539,13 +577,18 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
     extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
               "n_hypotheses": len(model.rotations), "search_points": len(pts),
               "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined]}
-    return final, best[2], margin, extras, t2
+    return final, best[2], margin, extras, t2, nearest
 
 
-def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os: np.ndarray, canonical_reference):
-    """Canonicalised ``T_scanner_object`` and its xyz-rpy covariance from the point-to-plane information."""
-    p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
-    d, j = _nearest(model, p, cfg.icp_max_correspondence_m)
+def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os: np.ndarray, canonical_reference,
+                nearest=None):
+    """Canonicalised ``T_scanner_object`` and its xyz-rpy covariance from the point-to-plane information.
+    ``nearest``: ``(p, d, j)`` of :func:`_icp_field_nearest` under ``T_os`` (computed here when None)."""
+    if nearest is None:
+        p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
+        d, j = _nearest(model, p, cfg.icp_max_correspondence_m)
+    else:
+        p, d, j = nearest
     ok = np.isfinite(d)
     n_j = model.normals_object[j[ok]]
     good = np.linalg.norm(n_j, axis=1) > 0.5

@@ -78,6 +78,12 @@ def inlier_statistics(source_points_target: np.ndarray, target_tree, max_corresp
         return 0.0, float("nan"), 0
     bound = max_correspondence_m if np.isfinite(max_correspondence_m) else np.inf
     d, _ = target_tree.query(source_points_target, k=1, distance_upper_bound=bound)
+    return _inlier_statistics_of_distances(d, max_correspondence_m)
+
+
+def _inlier_statistics_of_distances(d: np.ndarray, max_correspondence_m: float) -> tuple[float, float, int]:
+    """:func:`inlier_statistics` from the nearest-neighbour distances (N,) (inf beyond the bound), N > 0."""
+    n = len(d)
     ok = d <= max_correspondence_m
     n_in = int(np.count_nonzero(ok))
     rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if n_in else float("nan")
