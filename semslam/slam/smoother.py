@@ -79,14 +79,10 @@ class RtsRecorder:
         """A transition is about to change ``ekf``: snapshot its posterior if this opens a new segment."""
         if not self.active or self._open is not None:
             return
-        x, P = _snapshot(ekf)
-        self._bytes += P.nbytes
-        if self._bytes > self.max_bytes:
-            self._stop(f"skipped: the smoother's covariances would exceed {self.max_bytes / 1e6:.0f} MB "
-                       f"(state of {len(x)})")
-            return
-        self._open = (x, P)
-        self._F = np.eye(len(x))
+        snap = self._take(ekf)
+        if snap is not None:
+            self._open = snap
+            self._F = np.eye(len(snap[0]))
 
     def compose(self, F_op: np.ndarray, rows: int | None = None) -> None:
         """Apply the transition Jacobian ``F_op`` to the composed one. ``rows``: ``F_op`` acts on the first
@@ -111,13 +107,21 @@ class RtsRecorder:
             self._close(ekf)
         self._marks.append(len(self._prior))
 
-    def _close(self, ekf) -> None:
+    def _take(self, ekf) -> tuple[np.ndarray, np.ndarray] | None:
+        """A snapshot of ``ekf`` within the memory budget, else None (and recording stops)."""
         x, P = _snapshot(ekf)
         self._bytes += P.nbytes
         if self._bytes > self.max_bytes:
             self._stop(f"skipped: the smoother's covariances would exceed {self.max_bytes / 1e6:.0f} MB "
                        f"(state of {len(x)})")
+            return None
+        return x, P
+
+    def _close(self, ekf) -> None:
+        snap = self._take(ekf)
+        if snap is None:
             return
+        x, P = snap
         self._post.append(self._open)
         self._prior.append((x, P, self._F, _angle_mask(ekf)))
         self._open, self._F = None, None
