@@ -1,11 +1,17 @@
 """Descriptor timings, ours vs PCL 1.13 (pcl_ref), on clusters of 400-5000 points.
 
     .venv/bin/python benchmarks/descriptors.py [--reps 7]
+    .venv/bin/python benchmarks/descriptors.py --describe-ab [--reps 10]
 
 Prints a markdown table: our cold (first call in this process: numba cache load / compile) time,
 our median and best of REPS, PCL's best of REPS (pcl_ref's own timer, computation only), and the
 ratio PCL best / our best (> 1: we are faster). ESF uses our default numpy sampler; "vfh" is normals
 (radius) + VFH; "fpfh" is FPFH only (normals precomputed) as pcl_ref times it.
+
+``--describe-ab``: the pipeline's describe step (voxel grid, ESF, normals, VFH) on the clusters of 20 simulated
+scans that pass the size test, serial against normals + VFH on a helper thread
+(``semslam.recognition.database.CONCURRENT_DESCRIPTORS``), interleaved in one process (REPS rounds, the order
+alternating), medians per cluster.
 """
 
 from __future__ import annotations
@@ -49,7 +55,12 @@ def main() -> None:
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--reps", type=int, default=7)
-    reps = ap.parse_args().reps
+    ap.add_argument("--describe-ab", action="store_true")
+    args = ap.parse_args()
+    reps = args.reps
+    if args.describe_ab:
+        describe_ab(reps)
+        return
     rng = np.random.default_rng(0)
     milk = read_point_cloud(REAL / "milk.pcd").points_xyz_m
     chef = read_point_cloud(REAL / "chef.pcd").points_xyz_m
@@ -96,6 +107,42 @@ def main() -> None:
     for name, what, cold, med, best, ref in rows:
         c = f"{cold:.1f}" if cold is not None else ""
         print(f"| {name} | {what} | {c} | {med:.2f} | {best:.2f} | {ref:.2f} | {ref / best:.2f} |")
+
+
+def describe_ab(reps: int) -> None:
+    from semslam.pipeline import ScanRecognizer
+    from semslam.recognition import build_database
+    from semslam.recognition import database as D
+    from semslam.recognition.plausibility import cluster_extent_m
+    from semslam.segmentation.scene import segment_scene
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
+
+    views, classes = builtin_view_clouds(seed=0)
+    db = build_database(views, classes, seed=0)
+    rec = ScanRecognizer(db)
+    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0)
+    step = max(1, len(mission.scans) // 20)
+    clusters = [c for r in mission.scans[::step][:20]
+                for c in segment_scene(mission.load_scan(r.scan_id), rec.config.segmentation, seed=0).clusters]
+    limit = rec._max_plausible_extent_m()
+    clusters = [c for c in clusters if cluster_extent_m(c.points_xyz_m)[0] <= limit]
+    times: dict[bool, list[float]] = {False: [], True: []}
+    saved = D.CONCURRENT_DESCRIPTORS
+    for flag in (False, True):  # warm both paths
+        D.CONCURRENT_DESCRIPTORS = flag
+        db.describe(clusters[0], seed=0)
+    for r in range(max(reps, 1)):
+        for flag in ((False, True) if r % 2 == 0 else (True, False)):
+            D.CONCURRENT_DESCRIPTORS = flag
+            for k, c in enumerate(clusters):
+                t = time.perf_counter()
+                db.describe(c, seed=k)
+                times[flag].append((time.perf_counter() - t) * 1e3)
+    D.CONCURRENT_DESCRIPTORS = saved
+    print(f"| describe, {len(clusters)} clusters x {reps} | serial median ms | concurrent median ms | serial / concurrent |")
+    print("|---|---|---|---|")
+    a, b = float(np.median(times[False])), float(np.median(times[True]))
+    print(f"| voxel + ESF + normals + VFH | {a:.2f} | {b:.2f} | {a / b:.2f} |")
 
 
 if __name__ == "__main__":

@@ -47,3 +47,67 @@ def scan_angular_extent(points, viewpoint):
             out[0] = min(out[0], a)
             out[1] = max(out[1], a)
     return out
+
+
+@njit(cache=True)
+def mean_and_scatter(points):
+    """Mean (3,) of the points (N, 3), N >= 1, and their scatter matrix sum (p - mean)(p - mean)^T (3, 3)."""
+    n = points.shape[0]
+    mean = np.zeros(3)
+    for k in range(n):
+        for j in range(3):
+            mean[j] += points[k, j]
+    for j in range(3):
+        mean[j] /= n
+    s = np.zeros((3, 3))
+    for k in range(n):
+        x = points[k, 0] - mean[0]
+        y = points[k, 1] - mean[1]
+        z = points[k, 2] - mean[2]
+        s[0, 0] += x * x
+        s[0, 1] += x * y
+        s[0, 2] += x * z
+        s[1, 1] += y * y
+        s[1, 2] += y * z
+        s[2, 2] += z * z
+    s[1, 0] = s[0, 1]
+    s[2, 0] = s[0, 2]
+    s[2, 1] = s[1, 2]
+    return mean, s
+
+
+@njit(cache=True)
+def projected_extent(points, mean, axes):
+    """Max minus min (3,) of the centred points (N, 3), N >= 1, projected on the columns of ``axes`` (3, 3)."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for k in range(points.shape[0]):
+        x = points[k, 0] - mean[0]
+        y = points[k, 1] - mean[1]
+        z = points[k, 2] - mean[2]
+        for j in range(3):
+            p = x * axes[0, j] + y * axes[1, j] + z * axes[2, j]
+            lo[j] = min(lo[j], p)
+            hi[j] = max(hi[j], p)
+    return hi - lo
+
+
+@njit(cache=True)
+def selected_input_indices(cluster_voxels, n_voxels, point_voxel):
+    """Sorted indices i of the input points whose voxel ``point_voxel[i]`` is one of ``cluster_voxels`` (int64).
+
+    Same result as ``np.flatnonzero(mask[point_voxel])`` with ``mask[cluster_voxels] = True``.
+    """
+    mask = np.zeros(n_voxels, dtype=np.bool_)
+    for v in cluster_voxels:
+        mask[v] = True
+    count = 0
+    for i in range(point_voxel.shape[0]):
+        count += mask[point_voxel[i]]
+    out = np.empty(count, dtype=np.int64)
+    j = 0
+    for i in range(point_voxel.shape[0]):
+        if mask[point_voxel[i]]:
+            out[j] = i
+            j += 1
+    return out

@@ -32,11 +32,7 @@ from .recognition import (
     chi2_distances,
     combine_descriptors,
 )
-from .recognition.plausibility import (
-    cluster_extent_m,
-    scan_angular_extent,
-    touches_scan_border,
-)
+from .recognition.plausibility import border_touched, principal_extent, scan_angular_extent
 from .registration.pose import PoseConfig, PoseModel, estimate_object_pose, prepare_pose_model
 from .segmentation.scene import SegmentationConfig, SegmentationResult, segment_scene
 
@@ -291,11 +287,13 @@ class ScanRecognizer:
         detections: list[Detection] = []
         scan_extent = _scan_angular_extent(scan.points_xyz_m, scan.viewpoint_xyz_m) if cfg.border != "keep" else None
         max_plausible = self._max_plausible_extent_m()
+        viewpoint = np.ascontiguousarray(scan.viewpoint_xyz_m, dtype=np.float64)
         for k, cluster in enumerate(seg.clusters):
             cluster_seed = int(seeds[1]) + k
-            extent = cluster_extent_m(cluster.points_xyz_m)
-            border = scan_extent is not None and touches_scan_border(
-                cluster.points_xyz_m, scan_extent, scan.viewpoint_xyz_m, margin_rad=cfg.border_margin_rad)
+            # The clusters' points are checked PointCloud arrays: the kernels take them as they are.
+            extent = principal_extent(cluster.points_xyz_m)
+            border = scan_extent is not None and border_touched(
+                cluster.points_xyz_m, scan_extent, viewpoint, float(cfg.border_margin_rad))
             common = {"touches_border": bool(border), "extent_m": tuple(float(e) for e in extent)}
             if extent[0] > max_plausible:
                 outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, "", float("nan"), float("nan"), None,
@@ -333,7 +331,7 @@ class ScanRecognizer:
                                                    f"rejected: extent {extent[0]:.3f} m > {limit:.3f} m, too big for "
                                                    f"{label}", **common))
                     continue
-            raw_idx = seg.input_indices(k)
+            raw_idx = _input_indices(seg, k)
             det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
             det = self._detect(scan, raw_idx, cluster, label, view_index, match, det_stamp, scan_id, cluster_seed,
                                timings, border)
@@ -395,6 +393,17 @@ def _scan_angular_extent(points_xyz_m: np.ndarray, viewpoint_xyz_m: Any) -> np.n
         return scan_angular_extent(points_xyz_m, viewpoint_xyz_m)
     return kernel(np.ascontiguousarray(points_xyz_m, dtype=np.float64),
                   np.ascontiguousarray(viewpoint_xyz_m, dtype=np.float64))
+
+
+def _input_indices(seg: SegmentationResult, k: int) -> np.ndarray:
+    """``seg.input_indices(k)`` (same sorted int64 array) by a numba kernel: ~0.1 ms instead of ~0.5 ms on 100k
+    input points."""
+    from ._pipeline_kernels import selected_input_indices
+
+    if seg.point_voxel is None:
+        return seg.input_indices(k)
+    return selected_input_indices(np.asarray(seg.cluster_indices[k], dtype=np.int64), seg.segmented_cloud.n_points,
+                                  np.asarray(seg.point_voxel, dtype=np.int64))
 
 
 def recognize_scan(scan: PointCloud, db: ViewDatabase, config: PipelineConfig | None = None, *,

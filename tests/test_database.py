@@ -338,3 +338,38 @@ def test_build_rejects_bad_model_views(standin):
         build_database(views, classes, model_views=[("box", "m", PointCloud(np.zeros((2, 3))))])
     with pytest.raises(InputError, match="'model_views' .* must be \\(label, view_id, PointCloud\\)"):
         build_database(views, classes, model_views=[("box", "m")])
+
+
+def test_concurrent_descriptors_equal_serial_ones(monkeypatch):
+    """Normals + VFH on the helper thread (CONCURRENT_DESCRIPTORS, the default) give exactly the serial results,
+    and ESF's errors still come first."""
+    from semslam.descriptors import compute_esf, compute_vfh, estimate_normals
+    from semslam.errors import DescriptorError
+    from semslam.recognition import compute_view_descriptors
+    from semslam.recognition import database as database_module
+    from semslam.segmentation.voxel import voxel_downsample
+
+    views, _ = synthetic_shape_views(1, n_points=300, seed=7)
+    clouds = [v[2] for v in views[:2]]
+
+    def run():
+        return [compute_view_descriptors(c, normal_radius_m=0.015, esf_n_samples=1000, voxel_leaf_m=0.005, seed=i)
+                for i, c in enumerate(clouds)]
+
+    monkeypatch.setattr(database_module, "CONCURRENT_DESCRIPTORS", False)
+    serial = run()
+    # the serial path is the plain composition of the public descriptor functions
+    pts = voxel_downsample(clouds[0].points_xyz_m, 0.005)
+    np.testing.assert_array_equal(serial[0].esf, compute_esf(pts, n_samples=1000, seed=0))
+    nrm = estimate_normals(pts, radius_m=0.015, viewpoint_xyz_m=clouds[0].viewpoint_xyz_m).normals_xyz
+    ok = np.isfinite(nrm).all(axis=1)
+    np.testing.assert_array_equal(serial[0].vfh, compute_vfh(pts[ok], nrm[ok], viewpoint_xyz_m=clouds[0].viewpoint_xyz_m)
+                                  .astype(np.float32))
+    monkeypatch.setattr(database_module, "CONCURRENT_DESCRIPTORS", True)
+    for _ in range(2):
+        for a, b in zip(run(), serial):
+            np.testing.assert_array_equal(a.esf, b.esf)
+            np.testing.assert_array_equal(a.vfh, b.vfh)
+    line = PointCloud(np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)])  # both fail: ESF's error wins
+    with pytest.raises(DescriptorError, match="must span a surface"):
+        compute_view_descriptors(line, esf_n_samples=100)

@@ -131,3 +131,39 @@ def test_same_histogram_on_one_or_two_threads():
         numba.set_num_threads(before)
     np.testing.assert_array_equal(compute_esf(pts, seed=5), one)
     np.testing.assert_array_equal(compute_esf(pts, seed=5, sampler="pcl"), one_pcl)
+
+
+def _esf_in_one_chunk(pts, seed, n_samples):
+    """Reference: all of PCL's draws evaluated at once (no chunks), the first n_samples accepted in draw order
+    counted by a plain Python loop."""
+    from semslam.descriptors import _esf_kernels as K
+    from semslam.descriptors.esf import glibc_rand
+
+    local, vox, lut, _ = K.esf_prepare(np.ascontiguousarray(pts, dtype=np.float32))
+    m = 50 * n_samples
+    triples = (glibc_rand(seed, 3 * m) % len(pts)).reshape(m, 3)
+    out_i = np.empty((m, 11), dtype=np.int64)
+    out_f = np.empty((m, 8), dtype=np.float32)
+    K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
+    accepted = np.flatnonzero(out_i[:, 0])
+    return K.esf_histogram(out_i, out_f, int(accepted[n_samples - 1]) + 1)
+
+
+@pytest.mark.parametrize("n_points", [3, 5, 9, 400])
+def test_chunked_draws_equal_one_chunk(n_points):
+    """Few points: most draws repeat an index, so compute_esf needs several chunks of draws; the histogram
+    is the one of the first n_samples accepted triples whatever the chunking."""
+    pts = np.random.default_rng(n_points).normal(size=(n_points, 3))
+    for seed in (0, 7):
+        np.testing.assert_array_equal(compute_esf(pts, seed=seed, sampler="pcl", n_samples=2000),
+                                      _esf_in_one_chunk(pts, seed, 2000))
+
+
+def test_pcl_float32_accumulation_is_exact():
+    """The integer A3 / ratio / D2 / D3 counts equal PCL's float32 sums: the largest A3 bin sum (in 1/32)
+    stays far below 2^24, where float32 would start rounding."""
+    assert 20000 * 3 * 65 < 2**24
+    x = np.float32(0)
+    for k in np.random.default_rng(0).integers(1, 66, size=20000):  # PCL's order: one float32 add per sample
+        x = np.float32(x + np.float32(k) / np.float32(32))
+    assert x * 32 == float(np.sum(np.random.default_rng(0).integers(1, 66, size=20000)))

@@ -80,3 +80,26 @@ def test_bad_input_names_the_argument():
         estimate_normals(np.zeros((4, 3)), k=3, radius_m=0.1)
     with pytest.raises(InputError, match="radius_m"):
         estimate_normals(np.zeros((4, 3)), radius_m=-1.0)
+
+
+def test_fused_radius_kernel_equals_search_then_normals():
+    """estimate_normals(radius_m=...) runs the grid search and the normals in one kernel: bit-identical to
+    find_neighbors(method="grid") then the CSR kernel, counts included, on clouds with empty cells, duplicates,
+    isolated points and points exactly one radius apart."""
+    from semslam.descriptors._normals_kernels import normals_from_neighborhoods
+
+    rng = np.random.default_rng(11)
+    grid = np.stack(np.meshgrid(*[np.arange(6) * 0.01] * 3), -1).reshape(-1, 3)  # spacing = radius exactly
+    clouds = [rng.normal(size=(400, 3)) * [0.1, 0.1, 0.01], grid, np.vstack([grid[:40], grid[:40]]),
+              rng.uniform(-1, 1, size=(200, 3))]
+    for pts in clouds:
+        for radius in (0.01, 0.015, 0.05):
+            vp = rng.normal(size=3)
+            got = estimate_normals(pts, radius_m=radius, viewpoint_xyz_m=vp)
+            nb = find_neighbors(pts, radius_m=radius, method="grid")
+            normals, curvature = normals_from_neighborhoods(np.ascontiguousarray(pts, float), nb.indptr, nb.indices, vp)
+            np.testing.assert_array_equal(got.normals_xyz, normals)
+            np.testing.assert_array_equal(got.curvature, curvature)
+            np.testing.assert_array_equal(got.n_neighbors, nb.counts)
+            assert got.n_neighbors.dtype == np.int64
+    assert estimate_normals(np.zeros((0, 3)), radius_m=0.1).normals_xyz.shape == (0, 3)

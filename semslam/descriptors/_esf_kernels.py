@@ -84,7 +84,7 @@ def _vox(v):  # pragma: no cover - compiled
     return math.ceil(v) + GRID_H - 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def esf_prepare(points):  # pragma: no cover - compiled
     """Scale float32 points (N, 3) into the 64^3 voxel sphere as PCL does and mark the occupancy grid.
 
@@ -146,11 +146,12 @@ def _flat(x, y, z):  # pragma: no cover - compiled
     return ((x + 1) * PAD + (y + 1)) * PAD + (z + 1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
-    """PCL's 3-D Bresenham line test: (class 0 in / 1 out / 2 mixed, ratio, n_in, n_visited).
+    """PCL's 3-D Bresenham line test: (n_in, n_visited), the occupied and visited voxels of the line.
 
     The major axis has length L; L voxels are visited (start included, end excluded; 1 if L = 0).
+    Not inlined on purpose: as its own function the stepping loop keeps its state in registers.
     """
     dx = x2 - x1
     dy = y2 - y1
@@ -177,7 +178,7 @@ def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
     idx = _flat(x1, y1, z1)
     inside = 0
     for _ in range(1, la):
-        inside += lut[idx]
+        inside += lut[np.uintp(idx)]  # unsigned: no negative-index wrap-around test (idx is in the padded grid)
         s1 = e1 > 0  # branch-free steps (the branches are unpredictable)
         s2 = e2 > 0
         idx += sb * s1 + sc * s2
@@ -186,13 +187,18 @@ def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
         e1 += b2
         e2 += c2
         idx += sa
-    count = max(la, 1)
-    inside += lut[idx]
+    inside += lut[np.uintp(idx)]
+    return inside, max(la, 1)
+
+
+@njit(cache=True, inline="always")
+def _line_class(inside, count):  # pragma: no cover - compiled
+    """PCL's class of a line (0 in / 1 out / 2 mixed) and its in-ratio (mixed lines only)."""
     if inside >= count - 1:
-        return 0, F0, inside, count
+        return 0, F0
     if inside <= 7:
-        return 1, F0, inside, count
-    return 2, np.float32(inside) / np.float32(count), inside, count
+        return 1, F0
+    return 2, np.float32(inside) / np.float32(count)
 
 
 @njit(cache=True)
@@ -231,10 +237,11 @@ _I_OK, _I_TH1, _I_TH2, _I_TH3, _I_C1, _I_C2, _I_C3, _I_CLS, _I_N1, _I_N2, _I_N3 
 _F_D1, _F_D2, _F_D3, _F_R1, _F_R2, _F_R3, _F_AREA, _F_WT = range(8)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - compiled
     """Evaluate every candidate index triple (M, 3) independently (both cores), storing the results per
-    triple (``out_i[t, 0]`` = accepted) so that :func:`esf_consume` accumulates them in draw order, as PCL does.
+    triple (``out_i[t, 0]`` = accepted; ``out_i`` any integer type, int16 is enough) so that :func:`esf_cutoff`
+    finds the first ``n_samples`` accepted in draw order, as PCL takes them, and :func:`esf_histogram` bins them.
 
     A triple is accepted when its points differ, its triangle is not degenerate (Heron's
     s(s-a)(s-b)(s-c) > 0.001) and its three angle bins are valid. Per accepted triple: the angle bins, the
@@ -288,9 +295,12 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
         th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
         if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
             continue
-        c1, r1, in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
-        c2, r2, in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
-        c3, r3, in3, n3 = _lci(lut, vox[i2, 0], vox[i2, 1], vox[i2, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
+        in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        in3, n3 = _lci(lut, vox[i2, 0], vox[i2, 1], vox[i2, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
+        c1, r1 = _line_class(in1, n1)
+        c2, r2 = _line_class(in2, n2)
+        c3, r3 = _line_class(in3, n3)
         vs = in1 + in2 + in3
         pc = n1 + n2 + n3
         if vs <= 21:
@@ -323,88 +333,63 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
         out_f[t, _F_WT] = wt
 
 
-@njit(cache=True)
-def esf_consume(out_i, out_f, m, n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover
-    """Accumulate the accepted triples of :func:`esf_evaluate` in draw order until ``n_samples`` are accepted
-    (``acc[0]`` counts them, in place); returns the number of triples consumed. Per accepted sample k:
-    ``d2v[3k:3k+3]`` the side lengths, ``wt_d2[3k:3k+3]`` their line classes, ``d3v[k]`` the square-rooted
-    area, ``wt_d3[k]`` its in-ratio; ``h_a3`` (3, 64) gets the A3 histograms (in, out, mix) and ``h_ratio`` the
-    mixed-line ratios. Sequential, so that the float32 sums are PCL's."""
-    k = acc[0]
-    t = 0
-    while t < m and k < n_samples:
-        if out_i[t, _I_OK] == 0:
-            t += 1
-            continue
-        c1 = out_i[t, _I_C1]
-        c2 = out_i[t, _I_C2]
-        c3 = out_i[t, _I_C3]
-        d2v[3 * k] = out_f[t, _F_D1]
-        d2v[3 * k + 1] = out_f[t, _F_D2]
-        d2v[3 * k + 2] = out_f[t, _F_D3]
-        wt_d2[3 * k] = c1
-        wt_d2[3 * k + 1] = c2
-        wt_d2[3 * k + 2] = c3
-        if c1 == 2:
-            h_ratio[_round(out_f[t, _F_R1] * F63)] += F1
-        if c2 == 2:
-            h_ratio[_round(out_f[t, _F_R2] * F63)] += F1
-        if c3 == 2:
-            h_ratio[_round(out_f[t, _F_R3] * F63)] += F1
-        d3v[k] = out_f[t, _F_AREA]
-        wt_d3[k] = out_f[t, _F_WT]
-        cls = out_i[t, _I_CLS]
-        h_a3[cls, out_i[t, _I_TH1]] += np.float32(out_i[t, _I_N3]) / F32
-        h_a3[cls, out_i[t, _I_TH2]] += np.float32(out_i[t, _I_N1]) / F32
-        h_a3[cls, out_i[t, _I_TH3]] += np.float32(out_i[t, _I_N2]) / F32
-        k += 1
+@njit(cache=True, nogil=True)
+def esf_cutoff(out_i, lo, hi, n_needed):  # pragma: no cover - compiled
+    """Scan the evaluated triples lo..hi-1 in draw order: (accepted, end) where ``accepted`` counts the accepted
+    ones up to ``n_needed`` and ``end`` is the row after the last one counted (``hi`` if fewer)."""
+    k = 0
+    t = lo
+    while t < hi and k < n_needed:
+        k += out_i[t, _I_OK]
         t += 1
-    acc[0] = k
-    return t
+    return k, t
 
 
-@njit(cache=True)
-def esf_histogram(n_samples, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio):  # pragma: no cover - compiled
-    """The 640-bin float32 ESF from the accepted samples (PCL's block order, weights and sum-to-1)."""
+@njit(cache=True, nogil=True)
+def esf_histogram(out_i, out_f, end):  # pragma: no cover - compiled
+    """The 640-bin float32 ESF of the accepted triples among rows 0..end-1 of :func:`esf_evaluate`'s output
+    (PCL's block order, weights and sum-to-1).
+
+    PCL accumulates in draw order, in float32; here every histogram is an integer count (A3: the sum of the
+    visited-voxel counts that PCL adds, divided by 32 at the end). Both are exact, hence equal: every float32
+    partial sum of PCL is a multiple of 1/32 below 2^19 (at most 20000 samples x 3 angles x 65/32 per bin)
+    or an integer below 2^24, all of which float32 represents exactly. (Serial: ~0.4 ms, too little for a
+    parallel region to pay on a busy 2-core machine.)
+    """
     maxd2 = F0
     maxd3 = F0
-    for k in range(n_samples):
-        if d2v[3 * k] > maxd2:
-            maxd2 = d2v[3 * k]
-        if d2v[3 * k + 1] > maxd2:
-            maxd2 = d2v[3 * k + 1]
-        if d2v[3 * k + 2] > maxd2:
-            maxd2 = d2v[3 * k + 2]
-        if d3v[k] > maxd3:
-            maxd3 = d3v[k]
-    h_d3 = np.zeros((3, BINS), dtype=np.float32)  # in, out, mix
-    for k in range(n_samples):
-        idx = _round(d3v[k] / maxd3 * F63)
-        if idx < 0 or idx >= BINS:
+    for t in range(end):
+        if out_i[t, _I_OK]:
+            maxd2 = max(maxd2, out_f[t, _F_D1], out_f[t, _F_D2], out_f[t, _F_D3])
+            maxd3 = max(maxd3, out_f[t, _F_AREA])
+    # A3 sums (3 x 64: in, out, mix), D3 (3 x 64), D2 (3 x 64), mixed-line ratios (64): the output's order
+    c = np.zeros(10 * BINS, dtype=np.int64)
+    for t in range(end):
+        if out_i[t, _I_OK] == 0:
             continue
-        w = wt_d3[k]
-        if w >= 0.999:
-            h_d3[0, idx] += F1
-        elif w <= 0.001:
-            h_d3[1, idx] += F1
-        else:
-            h_d3[2, idx] += F1
-    h_d2 = np.zeros((3, BINS), dtype=np.float32)  # in, out, mix
-    for j in range(3 * n_samples):
-        idx = _round(d2v[j] / maxd2 * F63)
-        h_d2[wt_d2[j], idx] += F1
+        cls = out_i[t, _I_CLS]
+        c[cls * BINS + out_i[t, _I_TH1]] += out_i[t, _I_N3]
+        c[cls * BINS + out_i[t, _I_TH2]] += out_i[t, _I_N1]
+        c[cls * BINS + out_i[t, _I_TH3]] += out_i[t, _I_N2]
+        for j in range(3):
+            line_cls = out_i[t, _I_C1 + j]
+            if line_cls == 2:
+                c[9 * BINS + _round(out_f[t, _F_R1 + j] * F63)] += 1
+            # d > 0 and finite (accepted triangle): pcl_round without its NaN case
+            c[(6 + line_cls) * BINS + math.floor(out_f[t, _F_D1 + j] / maxd2 * F63 + F05)] += 1
+        idx = _round(out_f[t, _F_AREA] / maxd3 * F63)
+        if 0 <= idx < BINS:
+            w = out_f[t, _F_WT]
+            d3_cls = 0 if w >= 0.999 else (1 if w <= 0.001 else 2)
+            c[(3 + d3_cls) * BINS + idx] += 1
     hist = np.empty(10 * BINS, dtype=np.float32)
-    for b in range(BINS):
-        hist[b] = h_a3[0, b] * WEIGHTS[0]
-        hist[BINS + b] = h_a3[1, b] * WEIGHTS[1]
-        hist[2 * BINS + b] = h_a3[2, b] * WEIGHTS[2]
-        hist[3 * BINS + b] = h_d3[0, b] * WEIGHTS[3]
-        hist[4 * BINS + b] = h_d3[1, b] * WEIGHTS[4]
-        hist[5 * BINS + b] = h_d3[2, b] * WEIGHTS[5]
-        hist[6 * BINS + b] = h_d2[0, b] * F05 * WEIGHTS[6]
-        hist[7 * BINS + b] = h_d2[1, b] * WEIGHTS[7]
-        hist[8 * BINS + b] = h_d2[2, b] * WEIGHTS[8]
-        hist[9 * BINS + b] = h_ratio[b] * F05 * WEIGHTS[9]
+    for b in range(10 * BINS):
+        hist[b] = np.float32(c[b]) / F32 if b < 3 * BINS else np.float32(c[b])
+    for b in range(BINS):  # PCL halves D2-in and the ratio block before weighting
+        hist[6 * BINS + b] = hist[6 * BINS + b] * F05
+        hist[9 * BINS + b] = hist[9 * BINS + b] * F05
+    for b in range(10 * BINS):
+        hist[b] = hist[b] * WEIGHTS[b // BINS]
     total = F0
     for b in range(10 * BINS):
         total += hist[b]

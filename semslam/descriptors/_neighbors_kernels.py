@@ -102,7 +102,7 @@ def _block(s0, skeys, scells, start, dims, lo, hi):  # pragma: no cover - compil
     return n_cols
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_bucket_count(points, origin, cell_m, radius_m):  # pragma: no cover - compiled
     """Bucket the points (see :func:`_bucket`) and count the points closer than ``radius_m`` to
     each point (itself included). Returns (grid, counts (N,)) where grid is the tuple
@@ -142,7 +142,7 @@ def _count(order, skeys, spts, scells, start, dims, radius_m):  # pragma: no cov
     return counts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_fill(order, skeys, spts, scells, start, dims, radius_m, indptr, indices, sqdist):  # pragma: no cover
     """Fill the CSR ``indices`` and ``sqdist`` (squared distance < radius^2) given ``indptr`` from
     :func:`grid_bucket_count`. In each row the neighbours come column by column (x, then y), by cell z,

@@ -8,6 +8,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ._neighbors_kernels import _block, _bucket
+
 #: Jacobi sweeps are stopped after this many (4-6 reach machine precision on 3x3 matrices).
 MAX_SWEEPS = 32
 
@@ -61,7 +63,7 @@ def _jacobi_eigh3(a, v):  # pragma: no cover - compiled
         _rotate(a, v, 1, 2, 0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def normals_from_neighborhoods(points_xyz_m, indptr, indices, viewpoint_xyz_m):  # pragma: no cover
     """Normal and curvature of each CSR neighbourhood, as PCL's ``NormalEstimation``.
 
@@ -76,63 +78,109 @@ def normals_from_neighborhoods(points_xyz_m, indptr, indices, viewpoint_xyz_m): 
     a = np.empty((3, 3))
     v = np.empty((3, 3))
     for i in range(n):
-        lo = indptr[i]
-        hi = indptr[i + 1]
-        m = hi - lo
-        normals[i, 0] = normals[i, 1] = normals[i, 2] = np.nan
-        curvature[i] = np.nan
-        if m < 3:
-            continue
-        cx = 0.0
-        cy = 0.0
-        cz = 0.0
-        for t in range(lo, hi):
-            j = indices[t]
-            cx += points_xyz_m[j, 0]
-            cy += points_xyz_m[j, 1]
-            cz += points_xyz_m[j, 2]
-        cx /= m
-        cy /= m
-        cz /= m
-        xx = xy = xz = yy = yz = zz = 0.0
-        for t in range(lo, hi):
-            j = indices[t]
-            dx = points_xyz_m[j, 0] - cx
-            dy = points_xyz_m[j, 1] - cy
-            dz = points_xyz_m[j, 2] - cz
-            xx += dx * dx
-            xy += dx * dy
-            xz += dx * dz
-            yy += dy * dy
-            yz += dy * dz
-            zz += dz * dz
-        a[0, 0] = xx / m
-        a[0, 1] = a[1, 0] = xy / m
-        a[0, 2] = a[2, 0] = xz / m
-        a[1, 1] = yy / m
-        a[1, 2] = a[2, 1] = yz / m
-        a[2, 2] = zz / m
-        _jacobi_eigh3(a, v)
-        k = 0
-        if a[1, 1] < a[k, k]:
-            k = 1
-        if a[2, 2] < a[k, k]:
-            k = 2
-        trace = (a[0, 0] + a[1, 1]) + a[2, 2]
-        if not trace > 0.0:
-            continue
-        curvature[i] = abs(a[k, k] / trace)
-        nx = v[0, k]
-        ny = v[1, k]
-        nz = v[2, k]
-        px = viewpoint_xyz_m[0] - points_xyz_m[i, 0]
-        py = viewpoint_xyz_m[1] - points_xyz_m[i, 1]
-        pz = viewpoint_xyz_m[2] - points_xyz_m[i, 2]
-        if px * nx + py * ny + pz * nz < 0.0:
-            nx = -nx
-            ny = -ny
-            nz = -nz
-        normals[i, 0] = nx
-        normals[i, 1] = ny
-        normals[i, 2] = nz
+        _normal_of(points_xyz_m, indices[indptr[i]:indptr[i + 1]], i, viewpoint_xyz_m, a, v, normals, curvature)
     return normals, curvature
+
+
+@njit(cache=True, nogil=True)
+def radius_normals(points_xyz_m, origin, cell_m, radius_m, viewpoint_xyz_m):  # pragma: no cover - compiled
+    """:func:`normals_from_neighborhoods` of the radius neighbourhoods of ``find_neighbors(method="grid")``
+    in one pass: same neighbours in the same order (so bit-identical normals), without the counting pass and
+    the CSR arrays. Returns (normals (N, 3), curvature (N,), n_neighbors (N,) int64)."""
+    order, skeys, spts, scells, start, dims = _bucket(points_xyz_m, origin, cell_m)
+    n = order.shape[0]
+    r2 = radius_m * radius_m
+    normals = np.empty((n, 3))
+    curvature = np.empty(n)
+    counts = np.empty(n, dtype=np.int64)
+    a = np.empty((3, 3))
+    v = np.empty((3, 3))
+    lo = np.empty(9, dtype=np.int64)
+    hi = np.empty(9, dtype=np.int64)
+    buf = np.empty(n, dtype=np.int64)
+    s0 = 0
+    while s0 < n:
+        s1 = s0 + 1  # the points s0..s1-1 share a cell
+        while s1 < n and skeys[s1] == skeys[s0]:
+            s1 += 1
+        n_cols = _block(s0, skeys, scells, start, dims, lo, hi)
+        for s in range(s0, s1):
+            px = spts[s, 0]
+            py = spts[s, 1]
+            pz = spts[s, 2]
+            m = 0
+            for c in range(n_cols):  # grid_fill's order: column by column, then by sorted position
+                for t in range(lo[c], hi[c]):
+                    dx = spts[t, 0] - px
+                    dy = spts[t, 1] - py
+                    dz = spts[t, 2] - pz
+                    if (dx * dx + dy * dy) + dz * dz < r2:
+                        buf[m] = order[t]
+                        m += 1
+            i = order[s]
+            counts[i] = m
+            _normal_of(points_xyz_m, buf[:m], i, viewpoint_xyz_m, a, v, normals, curvature)
+        s0 = s1
+    return normals, curvature, counts
+
+
+@njit(cache=True, inline="always")
+def _normal_of(points_xyz_m, nbrs, i, viewpoint_xyz_m, a, v, normals, curvature):  # pragma: no cover - compiled
+    """Normal and curvature of point i from its neighbours ``nbrs`` (indices into the points), in place."""
+    m = nbrs.shape[0]
+    normals[i, 0] = normals[i, 1] = normals[i, 2] = np.nan
+    curvature[i] = np.nan
+    if m < 3:
+        return
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for t in range(m):
+        j = nbrs[t]
+        cx += points_xyz_m[j, 0]
+        cy += points_xyz_m[j, 1]
+        cz += points_xyz_m[j, 2]
+    cx /= m
+    cy /= m
+    cz /= m
+    xx = xy = xz = yy = yz = zz = 0.0
+    for t in range(m):
+        j = nbrs[t]
+        dx = points_xyz_m[j, 0] - cx
+        dy = points_xyz_m[j, 1] - cy
+        dz = points_xyz_m[j, 2] - cz
+        xx += dx * dx
+        xy += dx * dy
+        xz += dx * dz
+        yy += dy * dy
+        yz += dy * dz
+        zz += dz * dz
+    a[0, 0] = xx / m
+    a[0, 1] = a[1, 0] = xy / m
+    a[0, 2] = a[2, 0] = xz / m
+    a[1, 1] = yy / m
+    a[1, 2] = a[2, 1] = yz / m
+    a[2, 2] = zz / m
+    _jacobi_eigh3(a, v)
+    k = 0
+    if a[1, 1] < a[k, k]:
+        k = 1
+    if a[2, 2] < a[k, k]:
+        k = 2
+    trace = (a[0, 0] + a[1, 1]) + a[2, 2]
+    if not trace > 0.0:
+        return
+    curvature[i] = abs(a[k, k] / trace)
+    nx = v[0, k]
+    ny = v[1, k]
+    nz = v[2, k]
+    px = viewpoint_xyz_m[0] - points_xyz_m[i, 0]
+    py = viewpoint_xyz_m[1] - points_xyz_m[i, 1]
+    pz = viewpoint_xyz_m[2] - points_xyz_m[i, 2]
+    if px * nx + py * ny + pz * nz < 0.0:
+        nx = -nx
+        ny = -ny
+        nz = -nz
+    normals[i, 0] = nx
+    normals[i, 1] = ny
+    normals[i, 2] = nz

@@ -27,7 +27,7 @@ def _clamp_floor(x, nbins):  # pragma: no cover - compiled
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def vfh_angles(centroid, mean_normal, points, normals, legacy_f23, incr, size_mode, dist_norm, out):  # pragma: no cover
     """Fill ``out`` (180,) = f1 | f2 | f3 | f4 with the pair features of (centroid, mean normal)
     against every (point, normal), each adding ``incr``; pairs PCL rejects (point at the centroid,

@@ -71,34 +71,40 @@ def compute_esf(
         raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points. Got {n} identical points.")
     draw = _sampler(sampler, seed, n, caller)
 
-    acc = np.zeros(1, dtype=np.int64)
-    d2v = np.zeros(3 * n_samples, dtype=np.float32)
-    wt_d2 = np.zeros(3 * n_samples, dtype=np.int64)
-    d3v = np.zeros(n_samples, dtype=np.float32)
-    wt_d3 = np.zeros(n_samples, dtype=np.float32)
-    h_a3 = np.zeros((3, 64), dtype=np.float32)
-    h_ratio = np.zeros(64, dtype=np.float32)
+    accepted = 0
     drawn = 0
-    out_i = np.empty((0, 11), dtype=np.int64)
+    end = -1
+    # Every candidate triple's results, in draw order (rows 0..drawn-1); usually one chunk is enough.
+    out_i = np.empty((0, 11), dtype=np.int16)  # small integers: bins < 64, voxel counts <= 65
     out_f = np.empty((0, 8), dtype=np.float32)
     max_draws = MAX_DRAWS_PER_SAMPLE * n_samples
-    while acc[0] < n_samples:
+    while end < 0:
         if drawn >= max_draws:
             raise DescriptorError(
                 f"The 'points_xyz_m' argument of {caller} must span a surface (not all collinear). "
-                f"Got only {acc[0]} non-degenerate triangles in {drawn} random draws."
+                f"Got only {accepted} non-degenerate triangles in {drawn} random draws."
             )
         # Candidates for the missing samples at the acceptance rate seen so far (+ a margin).
-        rate = max(acc[0] / drawn, 0.01) if drawn else 0.95
-        chunk = int(min(max_draws - drawn, (n_samples - acc[0]) / rate * 1.03 + 64))
+        rate = max(accepted / drawn, 0.01) if drawn else 0.95
+        chunk = int(min(max_draws - drawn, (n_samples - accepted) / rate * 1.03 + 64))
         triples = draw(chunk)
-        if len(out_i) < len(triples):
-            out_i = np.empty((len(triples), 11), dtype=np.int64)
-            out_f = np.empty((len(triples), 8), dtype=np.float32)
-        # Both cores evaluate the triples; the accumulation stays sequential in draw order (bit-exact).
-        K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
-        drawn += K.esf_consume(out_i, out_f, len(triples), n_samples, acc, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
-    return K.esf_histogram(n_samples, d2v, wt_d2, d3v, wt_d3, h_a3, h_ratio)
+        if len(out_i) < drawn + chunk:
+            out_i = _grown(out_i, drawn + chunk)
+            out_f = _grown(out_f, drawn + chunk)
+        # Both cores evaluate the triples; the histograms count the first n_samples accepted in draw order.
+        K.esf_evaluate(local, vox, lut, triples, out_i[drawn:], out_f[drawn:])
+        got, stop = K.esf_cutoff(out_i, drawn, drawn + chunk, n_samples - accepted)
+        accepted += got
+        drawn += chunk
+        if accepted == n_samples:
+            end = stop
+    return K.esf_histogram(out_i, out_f, end)
+
+
+def _grown(a: np.ndarray, rows: int) -> np.ndarray:
+    out = np.empty((rows, a.shape[1]), dtype=a.dtype)
+    out[: len(a)] = a
+    return out
 
 
 def glibc_rand(seed: int, n: int) -> np.ndarray:

@@ -8,8 +8,8 @@ import numpy as np
 
 from .._validation import as_float_array
 from ..errors import DescriptorError
-from ._normals_kernels import normals_from_neighborhoods
-from .neighbors import Neighborhoods, resolve_neighbors
+from ._normals_kernels import normals_from_neighborhoods, radius_normals
+from .neighbors import _MAX_CELLS_PER_AXIS, Neighborhoods, resolve_neighbors
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,7 +77,30 @@ def estimate_normals(
     caller = "estimate_normals"
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller, error=DescriptorError)
     vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=caller, error=DescriptorError)
+    fused = _fused_radius_normals(pts, vp, k, radius_m, neighbors)
+    if fused is not None:
+        return fused
     neighbors = resolve_neighbors(pts, k=k, radius_m=radius_m, neighbors=neighbors, workers=workers, caller=caller,
                                   order="'k', 'radius_m' and 'neighbors'")
     normals, curvature = normals_from_neighborhoods(pts, neighbors.indptr, neighbors.indices, vp)
     return NormalsResult(normals, curvature, neighbors.counts)
+
+
+def _fused_radius_normals(pts: np.ndarray, vp: np.ndarray, k, radius_m, neighbors) -> NormalsResult | None:
+    """The radius search on the grid and the normals in one kernel (bit-identical to ``find_neighbors`` then
+    ``normals_from_neighborhoods``, ~2x faster on small clusters), when only a valid ``radius_m`` is given and
+    ``find_neighbors`` would use its grid; None otherwise (the general path then checks the arguments)."""
+    if k is not None or neighbors is not None or radius_m is None or len(pts) == 0:
+        return None
+    try:
+        r = float(radius_m)
+    except (TypeError, ValueError):
+        return None
+    if not (np.isfinite(r) and r > 0):
+        return None
+    origin = pts.min(axis=0)
+    cell_m = r * (1.0 + 1e-8)  # as find_neighbors
+    if not float((pts.max(axis=0) - origin).max()) / cell_m < _MAX_CELLS_PER_AXIS:
+        return None
+    normals, curvature, counts = radius_normals(pts, origin, cell_m, r, vp)
+    return NormalsResult(normals, curvature, counts)

