@@ -154,8 +154,11 @@ def main() -> int:
             ours = statistics.median(t[stage] for t in r["ours"])
             pcl = statistics.median(t[stage] for t in r["pcl"]) if r["pcl"] else float("nan")
             ratio = pcl / ours if ours > 0 and np.isfinite(pcl) else float("nan")
+            pcl_s, ratio_s = f"{pcl:.1f}", f"{ratio:.2f}"
+            if stage == "matching" or not np.isfinite(pcl):  # PCL has no matcher: ours on both sides, not compared
+                pcl_s = ratio_s = "-"
             print(f"| {group} | {len(r['ours'])} | {int(np.median(r['points']))} | {stage} | {ours:.1f} | "
-                  f"{pcl:.1f} | {ratio:.2f} |")
+                  f"{pcl_s} | {ratio_s} |")
         other = [t["total"] - sum(t[st] for st in STAGES[:-1]) for t in r["ours"]]
         print(f"| {group} | {len(other)} | | other (per-cluster glue) | {statistics.median(other):.1f} | | |")
         if group == "simulated":

@@ -254,7 +254,8 @@ def _matmul44(A, B, out):
 
 @njit(cache=True)
 def _exp_se3_into(delta, T):
-    """:func:`_exp_se3` written into ``T`` (4, 4) without allocations."""
+    """``Exp`` of ``delta = (phi, rho)`` (rotation vector, then translation; Rodrigues and the SE(3) V matrix)
+    written into ``T`` (4, 4) without allocations."""
     w0, w1, w2 = delta[0], delta[1], delta[2]
     ang = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     for a in range(4):
@@ -286,42 +287,3 @@ def _exp_se3_into(delta, T):
     T[0, 3] = r0 + b * x0 + cc * (w0 * wr - ww * r0)
     T[1, 3] = r1 + b * x1 + cc * (w1 * wr - ww * r1)
     T[2, 3] = r2 + b * x2 + cc * (w2 * wr - ww * r2)
-
-
-@njit(cache=True)
-def _exp_se3(delta):
-    """4x4 ``Exp`` of ``delta = (phi, rho)`` (rotation vector, then translation), with the SE(3) V matrix."""
-    w0, w1, w2 = delta[0], delta[1], delta[2]
-    ang = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    T = np.eye(4)
-    T[:3, :3] = _exp_so3(w0, w1, w2, ang)
-    K = np.zeros((3, 3))
-    K[0, 1], K[0, 2], K[1, 0], K[1, 2], K[2, 0], K[2, 1] = -w2, w1, w2, -w0, -w1, w0
-    if ang < 1e-10:
-        V = np.eye(3) + 0.5 * K
-    else:
-        V = np.eye(3) + (1.0 - np.cos(ang)) / ang ** 2 * K + (ang - np.sin(ang)) / ang ** 3 * (K @ K)
-    for a in range(3):
-        T[a, 3] = V[a, 0] * delta[3] + V[a, 1] * delta[4] + V[a, 2] * delta[5]
-    return T
-
-
-@njit(cache=True)
-def _exp_so3(w0, w1, w2, ang):
-    """Rotation matrix of the rotation vector (w0, w1, w2) of norm ``ang`` (Rodrigues)."""
-    R = np.eye(3)
-    if ang < 1e-12:
-        return R
-    k0, k1, k2 = w0 / ang, w1 / ang, w2 / ang
-    s, c = np.sin(ang), np.cos(ang)
-    C = 1.0 - c
-    R[0, 0] = c + k0 * k0 * C
-    R[0, 1] = k0 * k1 * C - k2 * s
-    R[0, 2] = k0 * k2 * C + k1 * s
-    R[1, 0] = k1 * k0 * C + k2 * s
-    R[1, 1] = c + k1 * k1 * C
-    R[1, 2] = k1 * k2 * C - k0 * s
-    R[2, 0] = k2 * k0 * C - k1 * s
-    R[2, 1] = k2 * k1 * C + k0 * s
-    R[2, 2] = c + k2 * k2 * C
-    return R
