@@ -43,7 +43,7 @@ def test_every_figure_is_embedded(quick_run):
     out, _ = quick_run
     pngs = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert {"table_esf_svm.png", "table_vfh_svm.png", "fig3_scan.png", "fig4_trajectories.png",
-            "fig6_error_bounds.png", "consensus.png", "nees.png", "pose_errors.png"} <= set(pngs)
+            "fig6_error_bounds.png", "fig_smoothed_errors.png", "consensus.png", "nees.png", "pose_errors.png"} <= set(pngs)
     html = (out / "report.html").read_text()
     assert len(re.findall(r"src='data:image/png;base64,", html)) == len(pngs)
     assert "<img" in html and "src='figures/" not in html  # self-contained
@@ -92,7 +92,7 @@ def test_slam_runs_are_reported_alike(quick_run, tmp_path):
                  "--detections", str(out / "detections.jsonl")]) == 0
     assert main(["report", str(slam_out)]) == 0
     names = {p.name for p in (slam_out / "figures").glob("*.png")}
-    assert {"fig4_trajectories.png", "fig6_error_bounds.png", "nees.png"} <= names
+    assert {"fig4_trajectories.png", "fig6_error_bounds.png", "fig_smoothed_errors.png", "nees.png"} <= names
 
 
 def test_recognize_runs_are_reported_alike(quick_run, tmp_path):

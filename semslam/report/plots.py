@@ -127,6 +127,28 @@ def plot_error_bounds(axes, runs: dict, truth: dict, *, detection_stamps_s: Sequ
         axes[0].set_title(title)
 
 
+def plot_smoothed_errors(ax, filtered: dict, smoothed: dict, truth: dict, *, title: str = "") -> None:
+    """Position error norm over time of each mode's online estimate (solid) and of its RTS-smoothed
+    trajectory (dotted). ``filtered`` and ``smoothed`` map a mode to ``stamp_s`` and ``position_ned_m``;
+    ``truth`` has ``stamp_s`` and ``position_ned_m``."""
+    for mode, run in filtered.items():
+        colour = MODE_COLOURS.get(mode, None)
+        for style, r, what in (("-", run, "online"), (":", smoothed.get(mode), "smoothed")):
+            if r is None:
+                continue
+            t = np.asarray(r["stamp_s"])
+            ref = np.stack([np.interp(t, truth["stamp_s"], np.asarray(truth["position_ned_m"])[:, i])
+                            for i in range(3)], 1)
+            err = np.linalg.norm(np.asarray(r["position_ned_m"]) - ref, axis=1)
+            ax.plot(t, err, color=colour, ls=style, lw=0.9, label=f"{MODE_NAMES.get(mode, mode)} {what}")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", ncol=2)
+    if title:
+        ax.set_title(title)
+
+
 def plot_nees(ax, stamp_s: np.ndarray, nees: np.ndarray, band: tuple[float, float], *, dof: int,
               label: str = "NEES", title: str = "") -> None:
     """NEES (or ANEES) over time with its chi-square 95% band."""
