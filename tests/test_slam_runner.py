@@ -180,3 +180,11 @@ def test_interpolated_attitude_noise_is_scaled(mission):
     assert r.attitude_at(ts[10])[1] == pytest.approx(1.0)
     assert r.attitude_at(ts[0] - 1.0)[1] == 1.0 and r.attitude_at(ts[-1] + 1.0)[1] == 1.0
     np.testing.assert_allclose(r.attitude_cov_world(rpy, f), 0.5 * r.attitude_cov_world(rpy), rtol=1e-12)
+
+
+def test_cli_montecarlo_rejects_a_bad_launch_sigma(capsys):
+    from semslam.cli.main import main
+
+    assert main(["montecarlo", "--runs", "1", "--mode", "dr", "--launch-sigma", "-0.01"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--launch-sigma" in err[0] and "-0.01" in err[0]

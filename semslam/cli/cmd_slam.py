@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
 def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     import sys
 
+    from ..errors import InputError
     from ..slam.montecarlo import run_montecarlo, write_montecarlo
     from ..slam.runner import MODES
     from ._output import emit
