@@ -299,7 +299,7 @@ def _section_detections(run_dir: Path) -> Section | None:
 
 def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
     from ..slam.metrics import chi2_band
-    from .plots import plot_error_bounds, plot_nees, plot_smoothed_errors, plot_trajectories
+    from .plots import plot_error_bounds, plot_smoothed_errors, plot_trajectories
 
     trajs = {mode: load_trajectory_csv(d / "trajectory.csv") for mode, d in runs.items()}
     metrics = {mode: _load_json(d / "metrics.json") or {} for mode, d in runs.items()}

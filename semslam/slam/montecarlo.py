@@ -62,9 +62,9 @@ class MonteCarloResult:
 
     def table(self) -> str:
         """Markdown table of the summary."""
-        rows = ["| mode | ATE mean (m) | ATE max (m) | DR/mode ATE | final err (m) | 3-sigma at 1/3, 2/3, end (m) | "
-                "ANEES | band | epochs in band | landmark ANEES pos (band) | landmark ANEES pose (band) | "
-                "smoothed ATE mean (m) | smoothed DR/mode | smoothed epochs in band |",
+        rows = [("| mode | ATE mean (m) | ATE max (m) | DR/mode ATE | final err (m) | 3-sigma at 1/3, 2/3, end (m) | "
+                 "ANEES | band | epochs in band | landmark ANEES pos (band) | landmark ANEES pose (band) | "
+                 "smoothed ATE mean (m) | smoothed DR/mode | smoothed epochs in band |"),
                 "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
         def lm(s, key):

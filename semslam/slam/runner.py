@@ -40,8 +40,8 @@ from .association import (
 from .consensus import ConsensusInitializer, Observation
 from .detections import TruthDetectionConfig, simulate_detections
 from .ekf import SemanticEkf
-from .smoother import RtsRecorder
 from .metrics import nis_summary, trajectory_metrics
+from .smoother import RtsRecorder
 
 MODES = ("dr", "position", "pose", "pose+heading")
 _EZ = np.array([0.0, 0.0, 1.0])
