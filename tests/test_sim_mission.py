@@ -201,6 +201,41 @@ def test_malformed_missions_raise_mission_errors(tmp_path, tiny_mission):
         write_mission(tiny_mission, good)
 
 
+def _flight(**kw):
+    from semslam.simulation.simulate import mission_trajectory
+
+    cfg = SimulatorConfig(trajectory=TrajectoryConfig(**kw))
+    return mission_trajectory(None, cfg, np.random.default_rng(3))
+
+
+def test_teleoperated_flight_wanders_but_stays_consistent():
+    """Speed wander and crab: the truth stays self-consistent (d position / dt = velocity, to finite-difference
+    accuracy), starts and stops at rest on the start point, and has the configured rms in cruise."""
+    import math
+
+    tr = _flight(speed_wander_mps=0.02, crab_rms_rad=math.radians(2.0))
+    dt = 1e-3
+    t = np.arange(0.0, tr.duration_s, dt)
+    s = tr.sample(t)
+    dp = np.gradient(s.position_ned_m, dt, axis=0)
+    np.testing.assert_allclose(dp[2:-2], s.velocity_ned_mps[2:-2], atol=2e-4)  # no jump in speed anywhere
+    ends = tr.sample([0.0, tr.duration_s])
+    np.testing.assert_allclose(np.linalg.norm(ends.velocity_ned_mps[:, :2], axis=1), 0.0, atol=1e-9)  # at rest
+    np.testing.assert_allclose(ends.position_ned_m[1, :2], ends.position_ned_m[0, :2], atol=1e-9)
+    cruise = (t > 5.0) & (t < tr.duration_s - 5.0)
+    speed = np.linalg.norm(s.velocity_ned_mps[cruise, :2], axis=1)
+    assert 0.015 < speed.std() < 0.025 and abs(speed.mean() - 0.3) < 0.01
+    assert speed.min() > 0.2  # never stops or reverses
+    crab = tr.crab_rad(t[cruise])
+    assert math.radians(1.5) < crab.std() < math.radians(2.5)
+    # the crab is heading minus course: body sway = -speed sin(crab)
+    np.testing.assert_allclose(s.velocity_body_mps[cruise, 1], -speed * np.sin(crab), atol=2e-3)
+    # off: exactly the nominal speed in cruise and no sway
+    ideal = _flight(speed_wander_mps=0.0, crab_rms_rad=0.0).sample(t[cruise])
+    np.testing.assert_allclose(np.linalg.norm(ideal.velocity_ned_mps[:, :2], axis=1), 0.3, atol=1e-12)
+    assert np.abs(ideal.velocity_body_mps[:, 1]).max() < 2e-3
+
+
 def test_bad_configuration_raises_simulation_error():
     with pytest.raises(SimulationError, match="seed"):
         simulate_mission(_tiny(), seed=-1, with_scans=False)
@@ -208,6 +243,10 @@ def test_bad_configuration_raises_simulation_error():
         TrajectoryConfig(loops=0)
     with pytest.raises(SimulationError, match="corner_radius_m"):
         simulate_mission(SimulatorConfig(trajectory=TrajectoryConfig(corner_radius_m=2.0)), with_scans=False)
+    with pytest.raises(SimulationError, match="speed_wander_mps"):
+        TrajectoryConfig(speed_wander_mps=0.1)
+    with pytest.raises(SimulationError, match="crab_rms_rad"):
+        TrajectoryConfig(crab_rms_rad=-0.01)
     with pytest.raises(SimulationError, match="Unknown field"):
         SimulatorConfig.from_dict({"dvl": {"rate": 5}})
     cfg = SimulatorConfig(world=WorldConfig(clutter=True))

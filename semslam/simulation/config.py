@@ -105,7 +105,13 @@ class WorldConfig(_Dict):
 @dataclass(frozen=True)
 class TrajectoryConfig(_Dict):
     """Girona 500-like flight: a square with rounded corners through the four objects, ``loops`` times,
-    at ``speed_mps`` and ``altitude_m`` above the flat floor, with small roll/pitch oscillations."""
+    at ``speed_mps`` and ``altitude_m`` above the flat floor, with small roll/pitch oscillations.
+
+    The papers' vehicle was teleoperated, so it holds neither its speed nor its heading exactly:
+    ``speed_wander_mps`` is the rms of a smooth surge-speed fluctuation (three sinusoids, periods 4-12 s,
+    random phases) and ``crab_rms_rad`` the rms of the heading's offset from the course (two sinusoids,
+    periods 5-10 s), which gives a sway velocity. Both fade in and out with the launch and stop ramps;
+    0 gives the ideal flight at exactly ``speed_mps`` along the path."""
 
     loops: int = 3
     speed_mps: float = 0.3
@@ -116,10 +122,18 @@ class TrajectoryConfig(_Dict):
     pitch_amplitude_rad: float = math.radians(2.0)
     truth_rate_hz: float = 50.0
     start_ramp_s: float = 3.0
+    speed_wander_mps: float = 0.02
+    crab_rms_rad: float = math.radians(2.0)
 
     def __post_init__(self) -> None:
         _check(self, positive=("speed_mps", "altitude_m", "truth_rate_hz"),
-               nonneg=("corner_radius_m", "altitude_wave_m", "roll_amplitude_rad", "pitch_amplitude_rad", "start_ramp_s"))
+               nonneg=("corner_radius_m", "altitude_wave_m", "roll_amplitude_rad", "pitch_amplitude_rad", "start_ramp_s",
+                       "speed_wander_mps", "crab_rms_rad"))
+        if self.speed_wander_mps > 0.25 * self.speed_mps:
+            raise SimulationError("The 'speed_wander_mps' field of TrajectoryConfig must be <= speed_mps / 4 (the vehicle "
+                                  f"never stops or reverses). Got {self.speed_wander_mps} with speed_mps {self.speed_mps} instead.")
+        if self.crab_rms_rad > math.radians(10.0):
+            raise SimulationError(f"The 'crab_rms_rad' field of TrajectoryConfig must be <= 10 degrees. Got {self.crab_rms_rad} rad instead.")
         if isinstance(self.loops, bool) or not isinstance(self.loops, int) or self.loops < 1:
             raise SimulationError(f"The 'loops' field of TrajectoryConfig must be an integer >= 1. Got {self.loops!r} instead.")
 

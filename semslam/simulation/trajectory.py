@@ -17,6 +17,23 @@ from ..geometry import rotations_from_rpy
 from .config import TrajectoryConfig
 
 
+#: surge-speed wander: sinusoids (period s, relative amplitude), scaled to ``speed_wander_mps`` rms
+_WANDER_PERIODS_S = np.array([11.3, 6.7, 4.1])
+_WANDER_WEIGHTS = np.array([0.7, 0.5, 0.35])
+#: crab (heading minus course): sinusoids (period s, relative amplitude), scaled to ``crab_rms_rad`` rms
+_CRAB_PERIODS_S = np.array([9.7, 5.3])
+_CRAB_WEIGHTS = np.array([0.8, 0.45])
+
+
+def _sines(t: np.ndarray, periods: np.ndarray, weights: np.ndarray, phases: np.ndarray, rms: float):
+    """``f(t) = sum a_i sin(w_i t + phi_i)`` with ``rms(f) = rms`` and its antiderivative ``F`` (F(t) =
+    -sum a_i / w_i cos(.)): (f, F)."""
+    w = 2 * np.pi / periods
+    a = weights * rms / np.sqrt(np.sum(weights**2) / 2)
+    arg = w[None, :] * t[:, None] + phases[None, :]
+    return np.sin(arg) @ a, -(np.cos(arg) @ (a / w))
+
+
 @dataclass(frozen=True, eq=False)
 class TrajectorySample:
     """Vehicle truth at ``stamp_s`` (N,): position NED (N, 3) m, roll-pitch-yaw (N, 3) rad, body-frame
@@ -60,6 +77,9 @@ class Trajectory:
         self.floor_depth_m = float(floor_depth_m)
         rng = as_rng(seed, caller="Trajectory")
         self._phase = rng.uniform(0, 2 * np.pi, 5)
+        # teleoperation: surge-speed wander and crab (drawn after the attitude phases, which keep their values)
+        self._wander_phase = rng.uniform(0, 2 * np.pi, len(_WANDER_PERIODS_S))
+        self._crab_phase = rng.uniform(0, 2 * np.pi, len(_CRAB_PERIODS_S))
         self._build_path(c, config.corner_radius_m)
         self.length_m = config.loops * self.perimeter_m
         ramp = config.start_ramp_s
@@ -122,19 +142,48 @@ class Trajectory:
         return pos, tan, np.arctan2(tan[:, 1], tan[:, 0])
 
     # -- motion --------------------------------------------------------------------------------
+    def _envelope(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``g(t)``, 0 at rest and 1 in cruise, and its derivative: the smoothstep ``3e^2 - 2e^3`` of the
+        ramp ``e = v_nominal / speed``, so that ``g`` and ``g'`` are continuous (no jump in speed)."""
+        Ta, T = self.config.start_ramp_s, self.duration_s
+        if Ta == 0:
+            return np.ones_like(t), np.zeros_like(t)
+        up, down = t < Ta, t > T - Ta
+        e = np.where(up, t / Ta, np.where(down, (T - t) / Ta, 1.0))
+        de = np.where(up, 1.0 / Ta, np.where(down, -1.0 / Ta, 0.0))
+        return e * e * (3 - 2 * e), 6 * e * (1 - e) * de
+
     def _arc_length(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Arc length s(t) and speed v(t): linear ramp up over ``start_ramp_s``, cruise, ramp down."""
-        V, Ta, T = self.config.speed_mps, self.config.start_ramp_s, self.duration_s
+        """Arc length s(t) and speed v(t): linear ramp up over ``start_ramp_s``, cruise, ramp down, plus
+        the speed wander ``g(t) ds(t)`` (``ds`` the wander's displacement, ``g`` the ramp envelope): it
+        vanishes, with its derivative, at both ends, so the flight still starts and stops at rest."""
+        cfg = self.config
+        V, Ta, T = cfg.speed_mps, cfg.start_ramp_s, self.duration_s
         t = np.clip(t, 0.0, T)
         if Ta == 0:
-            return V * t, np.full_like(t, V)
-        up, down = t < Ta, t > T - Ta
-        s = np.where(up, V * t**2 / (2 * Ta), V * (t - Ta / 2))
-        v = np.where(up, V * t / Ta, V)
-        td = T - t
-        s = np.where(down, self.length_m - V * td**2 / (2 * Ta), s)
-        v = np.where(down, V * td / Ta, v)
+            s, v = V * t, np.full_like(t, V)
+        else:
+            up, down = t < Ta, t > T - Ta
+            s = np.where(up, V * t**2 / (2 * Ta), V * (t - Ta / 2))
+            v = np.where(up, V * t / Ta, V)
+            td = T - t
+            s = np.where(down, self.length_m - V * td**2 / (2 * Ta), s)
+            v = np.where(down, V * td / Ta, v)
+        if cfg.speed_wander_mps > 0:
+            dv, ds = _sines(t, _WANDER_PERIODS_S, _WANDER_WEIGHTS, self._wander_phase, cfg.speed_wander_mps)
+            ds = ds - _sines(np.zeros(1), _WANDER_PERIODS_S, _WANDER_WEIGHTS, self._wander_phase, cfg.speed_wander_mps)[1]
+            g, dg = self._envelope(t)
+            s = s + g * ds
+            v = v + dg * ds + g * dv
         return s, v
+
+    def crab_rad(self, t: np.ndarray) -> np.ndarray:
+        """Heading minus course (rad) at ``t``: the teleoperated vehicle's crab, faded with the ramps."""
+        cfg = self.config
+        t = np.clip(t, 0.0, self.duration_s)
+        if cfg.crab_rms_rad == 0:
+            return np.zeros_like(t)
+        return self._envelope(t)[0] * _sines(t, _CRAB_PERIODS_S, _CRAB_WEIGHTS, self._crab_phase, cfg.crab_rms_rad)[0]
 
     def sample(self, stamp_s) -> TrajectorySample:
         """Vehicle truth at the given stamps (seconds from the mission start, clamped to the flight)."""
@@ -142,6 +191,7 @@ class Trajectory:
         cfg, ph = self.config, self._phase
         s, v = self._arc_length(t)
         pos2, tan2, yaw = self._path(s)
+        yaw = np.arctan2(np.sin(yaw + self.crab_rad(t)), np.cos(yaw + self.crab_rad(t)))
         w_alt = 2 * np.pi / 20.0
         alt = cfg.altitude_m + cfg.altitude_wave_m * np.sin(w_alt * t + ph[0])
         dalt = cfg.altitude_wave_m * w_alt * np.cos(w_alt * t + ph[0])
