@@ -52,9 +52,10 @@ class SlamConfig:
     """Filter settings (SI units, radians). :meth:`for_mission` takes the sensor noise from the mission."""
 
     #: white body-frame acceleration noise (m/s/sqrt(s)): one number, or (surge, sway, heave). The default follows
-    #: the vehicle: surge changes at the corners (truth: rms ~0.02, peaks 0.1; the peaks are caught by the DVL's
-    #: manoeuvre reset), little sway or heave. (0.05, 0.01, 0.02) made the filter pessimistic (position ANEES
-    #: 2.4-2.5 of 3 over 15-30 Monte-Carlo runs) once the launch error no longer dominated early epochs
+    #: the teleoperated vehicle (simulator truth in cruise: surge acceleration rms 0.018 m/s^2 from a 0.02 m/s speed
+    #: wander, sway 0.008 from a 2 deg crab, heave 0.009 from the altitude wave; the launch and stop ramps' 0.1 m/s^2
+    #: are caught by the DVL's manoeuvre reset). (0.05, 0.01, 0.02) made the filter pessimistic; a near-zero surge
+    #: noise would be right only for a vehicle that never changes speed (and diverges at the launch ramp)
     velocity_rw_mps_per_sqrt_s: float | tuple = (0.02, 0.01, 0.01)
     dvl_noise_abs_mps: float = 0.001
     dvl_noise_rel: float = 0.003
@@ -289,6 +290,22 @@ def run_slam(mission: Mission, detections_by_scan: dict[int, list[Detection]] | 
     if detections_by_scan is None and mode != "dr":
         detections_by_scan = simulate_detections(mission, cfg.detections, seed=rng, symmetries=symmetries)
     return _Runner(mission, cfg, mode, symmetries, init_rng).run(detections_by_scan or {})
+
+
+def _drift_since(P_now: np.ndarray, P_then: list[np.ndarray]) -> np.ndarray:
+    """Covariance of ``mean_i (e_now - e_i)``, the vehicle's position-error growth since each of ``n``
+    observations (``P_then`` their position covariances, oldest first), as for a random walk: the growth
+    since observation ``i`` is the positive part ``D_i`` of ``P_now - P_i``, growths are nested, so
+    ``cov(e_now - e_i, e_now - e_j) = D_max(i, j)`` and the mean's covariance is ``sum_ij D_max(i,j) / n^2``."""
+    n = len(P_then)
+    if n == 0:
+        return np.zeros((3, 3))
+    out = np.zeros((3, 3))
+    for i, Pi in enumerate(P_then):
+        w, V = np.linalg.eigh(0.5 * ((P_now - Pi) + (P_now - Pi).T))
+        D = (V * np.maximum(w, 0.0)) @ V.T
+        out += (2 * i + 1) * D  # D_i is the later member for pairs (i, j <= i): 2 i + 1 of them
+    return out / (n * n)
 
 
 def _slope_test(world: dict, beam_angle_rad: float):
@@ -667,7 +684,7 @@ class _Runner:
         p = ekf.xa[0:3].copy()
         axes_w = x.unobservable_axes_vehicle @ R.T
         obs = Observation(x.label, t, p + R @ x.p_vehicle_object_m, R @ x.R_vehicle_object, x.symmetry, axes_w,
-                          payload=(R, p, x, att_cov, det.extras.get("object_name", "")))
+                          payload=(R, p, x, att_cov, det.extras.get("object_name", ""), ekf.Paa[0:3, 0:3].copy()))
         res = self.consensus.add(obs)
         self._log(stamp_s=t, kind="candidate", label=x.label, detection=x.index, accepted=res is not None,
                   object_name=det.extras.get("object_name", ""))
@@ -683,7 +700,7 @@ class _Runner:
         Cp = np.zeros((3, 3))
         Cr = np.zeros((3, 3))
         for o in members:
-            R, p, x, att_cov, _ = o.payload
+            R, p, x, att_cov, _, _ = o.payload
             N = x.noise_cov
             Cp += R @ N[0:3, 0:3] @ R.T
             Cr += R @ N[3:6, 3:6] @ R.T
@@ -693,6 +710,10 @@ class _Runner:
                 Cr += att_cov
         Cp /= n * n
         Cr /= n * n
+        # the members' world positions carry the vehicle's error at *their* stamps, the new landmark is tied to
+        # the vehicle *now*: add the covariance of the mean displacement error since then (else the landmark looks
+        # n-fold more precise relative to the vehicle than it is, and the next detections fail the gate)
+        Cp += _drift_since(ekf.Paa[0:3, 0:3], [o.payload[5] for o in sorted(members, key=lambda o: o.stamp_s)])
         axes = members[0].axes_world
         for u in axes:  # free rotation about an unobservable axis: wide prior, never updated
             Cr += np.outer(u, u) * np.pi**2
