@@ -148,6 +148,24 @@ def test_montecarlo_reports_anees_band(tmp_path):
     assert "| pose |" in (tmp_path / "summary.md").read_text()
 
 
+def test_montecarlo_pairs_each_mode_with_its_baseline_on_the_same_missions():
+    from semslam.slam.montecarlo import run_montecarlo
+
+    res = run_montecarlo(3, modes=("dr", "position", "pose"), seed=4, source="synthetic", loops=1)
+    ate = {m: np.array([r["ate_rmse_m"] for r in res.run_metrics[m]]) for m in res.modes}
+    for mode, base in (("position", "dr"), ("pose", "position")):
+        d = ate[mode] - ate[base]
+        p = res.summary[mode]["paired"][base]
+        assert p["ate_diff_mean_m"] == pytest.approx(d.mean(), abs=1e-15)
+        assert p["ate_diff_se_m"] == pytest.approx(d.std(ddof=1) / np.sqrt(3), rel=1e-12)
+        assert p["fraction_not_worse"] == pytest.approx(np.mean(d <= 0))
+    assert "paired" not in res.summary["dr"]
+    sm = np.array([r["smoother"]["ate_rmse_m"] for r in res.run_metrics["pose"]]) - np.array(
+        [r["smoother"]["ate_rmse_m"] for r in res.run_metrics["position"]])
+    assert res.summary["pose"]["paired"]["position"]["smoothed"]["ate_diff_mean_m"] == pytest.approx(sm.mean(), abs=1e-15)
+    assert "| pose - position |" in res.table()
+
+
 def test_each_detection_is_processed_at_its_own_stamp(mission):
     # merging pairs of scans into one scan id (each detection keeping its own stamp, as the pipeline's
     # per-cluster median stamps do) must not change the run: the filter uses the detection's stamp, not the

@@ -80,6 +80,16 @@ class MonteCarloResult:
                         f"{s['anees_mean']:.2f} | [{s['band'][0]:.2f}, {s['band'][1]:.2f}] | "
                         f"{100 * s['fraction_in_band']:.0f} % | {lm(s, 'landmark_nees_position')} | "
                         f"{lm(s, 'landmark_nees_pose')} | {_smoothed_cells(s)} |")
+        pairs = [(a, b, v) for a in self.modes for b, v in self.summary[a].get("paired", {}).items()]
+        if pairs:
+            rows += ["", "| paired, same missions | ATE difference mean +- s.e. (m) | runs not worse | "
+                         "smoothed: difference mean +- s.e. (m) | smoothed: runs not worse |", "|---|---|---|---|---|"]
+            for a, b, v in pairs:
+                sm = v.get("smoothed")
+                rows.append(f"| {a} - {b} | {v['ate_diff_mean_m']:+.5f} +- {v['ate_diff_se_m']:.5f} | "
+                            f"{100 * v['fraction_not_worse']:.0f} % | "
+                            + (f"{sm['ate_diff_mean_m']:+.5f} +- {sm['ate_diff_se_m']:.5f} | "
+                               f"{100 * sm['fraction_not_worse']:.0f} % |" if sm else "- | - |"))
         return "\n".join(rows)
 
 
@@ -156,6 +166,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
             summary[mode]["smoothed"] = {"ate_rmse_mean_m": float(np.mean(smoothed)),
                                          "ate_rmse_max_m": float(np.max(smoothed)),
                                          "anees_mean": a_s["anees_mean"], "fraction_in_band": a_s["fraction_in_band"]}
+    _paired(summary, met, modes)
     if "dr" in summary:
         for mode in modes:
             summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(summary[mode]["ate_rmse_mean_m"], 1e-12)
@@ -164,6 +175,34 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
                                                                  / max(summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12))
     return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
                             {m: out[m][2] for m in modes}, met, summary)
+
+
+#: mode -> the mode it is meant to improve on (paired comparison on the same missions)
+_BASELINE = {"position": "dr", "pose": "position", "pose+heading": "pose"}
+
+
+def _paired(summary: dict, met: dict, modes: tuple) -> None:
+    """``summary[mode]["paired"][baseline]``: per-run ATE differences ``mode - baseline`` on the same missions
+    (mean, standard error of the mean, fraction of runs with ``mode <= baseline``), online and smoothed. A mean
+    difference within two standard errors of 0 is a tie that more runs would be needed to break."""
+    for mode in modes:
+        base = _BASELINE.get(mode)
+        if base not in modes:
+            continue
+        entry = {}
+        for key, get in (("online", lambda m: m["ate_rmse_m"]),
+                         ("smoothed", lambda m: (m.get("smoother") or {}).get("ate_rmse_m"))):
+            a = [get(m) for m in met[mode]]
+            b = [get(m) for m in met[base]]
+            if any(v is None for v in a + b):
+                continue
+            d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+            se = float(d.std(ddof=1) / math.sqrt(len(d))) if len(d) > 1 else float("nan")
+            entry[key] = {"ate_diff_mean_m": float(d.mean()), "ate_diff_se_m": se,
+                          "fraction_not_worse": float(np.mean(d <= 0.0))}
+        if "online" in entry:
+            summary[mode]["paired"] = {base: {**entry["online"], **({"smoothed": entry["smoothed"]}
+                                                                    if "smoothed" in entry else {})}}
 
 
 def _smoothed_cells(s: dict) -> str:
