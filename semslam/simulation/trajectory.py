@@ -16,7 +16,6 @@ from ..errors import SimulationError
 from ..geometry import rotations_from_rpy
 from .config import TrajectoryConfig
 
-
 #: surge-speed wander: sinusoids (period s, relative amplitude), scaled to ``speed_wander_mps`` rms
 _WANDER_PERIODS_S = np.array([11.3, 6.7, 4.1])
 _WANDER_WEIGHTS = np.array([0.7, 0.5, 0.35])

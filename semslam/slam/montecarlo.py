@@ -82,8 +82,8 @@ class MonteCarloResult:
                         f"{lm(s, 'landmark_nees_pose')} | {_smoothed_cells(s)} |")
         pairs = [(a, b, v) for a in self.modes for b, v in self.summary[a].get("paired", {}).items()]
         if pairs:
-            rows += ["", "| paired, same missions | ATE difference mean +- s.e. (m) | runs not worse | "
-                         "smoothed: difference mean +- s.e. (m) | smoothed: runs not worse |", "|---|---|---|---|---|"]
+            rows += ["", ("| paired, same missions | ATE difference mean +- s.e. (m) | runs not worse | "
+                          "smoothed: difference mean +- s.e. (m) | smoothed: runs not worse |"), "|---|---|---|---|---|"]
             for a, b, v in pairs:
                 sm = v.get("smoothed")
                 rows.append(f"| {a} - {b} | {v['ate_diff_mean_m']:+.5f} +- {v['ate_diff_se_m']:.5f} | "
