@@ -190,7 +190,9 @@ class Trajectory:
         cfg, ph = self.config, self._phase
         s, v = self._arc_length(t)
         pos2, tan2, yaw = self._path(s)
-        yaw = np.arctan2(np.sin(yaw + self.crab_rad(t)), np.cos(yaw + self.crab_rad(t)))
+        if cfg.crab_rms_rad > 0:
+            heading = yaw + self.crab_rad(t)
+            yaw = np.arctan2(np.sin(heading), np.cos(heading))
         w_alt = 2 * np.pi / 20.0
         alt = cfg.altitude_m + cfg.altitude_wave_m * np.sin(w_alt * t + ph[0])
         dalt = cfg.altitude_wave_m * w_alt * np.cos(w_alt * t + ph[0])
