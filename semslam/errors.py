@@ -62,3 +62,11 @@ class ConfigError(SemslamError):
 
 class ReportError(SemslamError):
     """A run directory cannot be reported (missing outputs, wrong format)."""
+
+
+class BagError(SemslamError):
+    """A ROS bag cannot be read: missing or corrupt file, unknown message type, missing or mistyped topic."""
+
+
+class DatasetError(MissionError):
+    """A dataset (sensor logs, vehicle description, mission directory) is missing, malformed or inconsistent."""
