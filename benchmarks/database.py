@@ -121,7 +121,7 @@ def novel_views(args):
 def clutter(args):
     """Unknown objects: the simulator's rocks and pipe offcuts (its private mesh makers, seen by the same
     Kinect-like camera as the database) when it has them, plus synthetic rocks, pipes and wall pieces."""
-    from semslam.recognition._synthetic import clutter_clouds
+    from semslam.experiments.synthetic_views import clutter_clouds
 
     out = [(f"synthetic {kind}", cloud) for kind, cloud in clutter_clouds(args.n_clutter, n_points=2000, seed=args.seed)]
     try:

@@ -30,9 +30,9 @@ import numpy as np
 
 
 def main() -> None:
-    from semslam.recognition.builtin import builtin_database
+    from semslam.simulation.builtin_db import builtin_database
     from semslam.registration import PoseConfig, prepare_pose_model
-    from semslam.registration._pose_eval import evaluate, simulated_clusters, summary_table
+    from semslam.experiments.pose_eval import evaluate, simulated_clusters, summary_table
     from semslam.simulation import builtin_view_clouds
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -25,7 +25,7 @@ import numpy as np
 
 def mission_pr(args) -> None:
     from semslam.pipeline import PipelineConfig, ScanRecognizer
-    from semslam.recognition.builtin import builtin_database
+    from semslam.simulation.builtin_db import builtin_database
     from semslam.simulation import SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
     from semslam.simulation.truth import cluster_truth
 

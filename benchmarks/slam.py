@@ -10,13 +10,12 @@ import time
 import numpy as np
 
 from semslam.detection import Detection
-from semslam.errors import SemslamError
+from semslam.simulation.truth_slam import run_truth_slam
 from semslam.geometry import RigidTransform, rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
 from semslam.slam.association import innovation, measurement_from_detection
 from semslam.slam.ekf import SemanticEkf
-from semslam.slam.runner import run_slam
-from semslam.slam.synthetic import square_mission
+from semslam.experiments.synthetic import square_mission
 
 
 def _map(n_landmarks: int, rng) -> SemanticEkf:
@@ -77,24 +76,21 @@ def main() -> None:
     for n in (10, 100, 1000):
         r = bench_update(n)
         print(f"| {n} | {r['update_ms']:.3f} | {r['flush_ms']:.1f} | {bench_dense_update(n):.1f} |")
-    print("\n## Mission processing speed (truth-based detections generated inside run_slam; best of 3)\n")
+    print("\n## Mission processing speed (truth-based detections generated inside run_truth_slam; best of 3)\n")
     print("| mission | mode | mission (s) | wall (s) | real-time factor |")
     print("|---|---|---|---|---|")
     missions = [("synthetic square, 3 loops", square_mission(seed=0), {})]
-    try:
-        from semslam.slam.montecarlo import make_mission
-        from semslam.slam.runner import builtin_symmetries
+    from semslam.experiments.montecarlo import make_mission
+    from semslam.simulation.truth_slam import builtin_symmetries
 
-        missions.append(("simulator default (3 loops)", make_mission(0, source="simulator"), builtin_symmetries()))
-    except (ImportError, SemslamError) as exc:  # pragma: no cover - simulator unavailable
-        print(f"(simulator mission skipped: {exc})")
+    missions.append(("simulator default (3 loops)", make_mission(0, source="simulator"), builtin_symmetries()))
     for name, m, sym in missions:
-        run_slam(m, mode="pose", seed=0, symmetries=sym)  # warm-up (numba cache)
+        run_truth_slam(m, mode="pose", seed=0, symmetries=sym)  # warm-up (numba cache)
         for mode in ("dr", "position", "pose", "pose+heading"):
             w = np.inf
             for _ in range(3):
                 t = time.perf_counter()
-                run_slam(m, mode=mode, seed=0, symmetries=sym)
+                run_truth_slam(m, mode=mode, seed=0, symmetries=sym)
                 w = min(w, time.perf_counter() - t)
             print(f"| {name} | {mode} | {m.duration_s:.0f} | {w:.2f} | {m.duration_s / w:.0f}x |")
 

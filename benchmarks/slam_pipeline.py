@@ -14,26 +14,13 @@ import math
 
 import numpy as np
 
-from semslam.pipeline import ScanRecognizer
-from semslam.recognition.builtin import builtin_database
+from semslam.pipeline import ScanRecognizer, detect_mission
+from semslam.simulation.builtin_db import builtin_database
 from semslam.simulation import simulate_mission
-from semslam.simulation.truth import point_stamps_s
-from semslam.slam.runner import run_slam
+from semslam.simulation.truth_slam import builtin_symmetries
+from semslam.slam import run_slam
 
 MODES = ("dr", "position", "pose", "pose+heading")
-
-
-def pipeline_detections(mission, recognizer: ScanRecognizer, seed: int) -> dict:
-    """Reliable detections per scan id, each stamped as the demo stamps them."""
-    out = {}
-    for rec in mission.scans:
-        cloud = mission.load_scan(rec.scan_id)
-        res = recognizer.recognize(cloud, seed=seed * 100003 + rec.scan_id, stamp_s=rec.end_stamp_s,
-                                   scan_id=rec.scan_id, point_stamps_s=point_stamps_s(mission, rec, cloud))
-        kept = [d for d in res.detections if d.reliable]
-        if kept:
-            out[rec.scan_id] = kept
-    return out
 
 
 def main() -> None:
@@ -48,10 +35,10 @@ def main() -> None:
     print("|---" * (len(MODES) + 1) + "|")
     for seed in range(args.first, args.first + args.missions):
         mission = simulate_mission(seed=seed)
-        dets = pipeline_detections(mission, recognizer, seed)
+        dets = detect_mission(mission, recognizer, seed=seed).detections_by_scan  # reliable only, as the demo
         cells = []
         for mode in MODES:
-            r = run_slam(mission, dets, mode=mode, seed=seed)
+            r = run_slam(mission, dets, mode=mode, seed=seed, symmetries=builtin_symmetries())
             ate[mode].append((r.metrics["ate_rmse_m"], r.metrics["smoother"]["ate_rmse_m"]))
             cells.append(f"{ate[mode][-1][0]:.4f} / {ate[mode][-1][1]:.4f}")
         print(f"| {seed} | " + " | ".join(cells) + " |", flush=True)

@@ -31,8 +31,9 @@ from typing import Callable
 import numpy as np
 
 from ._atomic import atomic_write_text
-from .cli._output import to_jsonable
+from ._jsonable import to_jsonable
 from .errors import InputError
+from .experiments.recognition_scoring import recognition_summary, score_scan
 
 MODES = ("dr", "position", "pose", "pose+heading")
 
@@ -114,7 +115,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     ``overwrite``): a run never mixes its files with another's.
     """
     from .recognition import build_database, leave_one_out, save_database
-    from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission, write_mission
+    from .dataset import read_mission, write_mission
+    from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
     from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 
     cfg = DemoConfig() if config is None else config
@@ -149,6 +151,9 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
     mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress)
     stages.run("write mission", write_mission, mission, out / "mission")
+    # from here on the demo works on the mission as written (float32 scans), exactly what `semslam detect` and
+    # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
+    mission = read_mission(out / "mission")
 
     # 3. recognition on every scan
     rec_out = stages.run("recognise objects in every scan", _recognize_mission, mission, db, cfg, out, progress)
@@ -211,94 +216,29 @@ def _svm_for_loo(db, descriptor: str, cfg: DemoConfig):
 
 
 def _recognize_mission(mission, db, cfg: DemoConfig, out: Path, progress: bool) -> dict:
-    from .pipeline import PipelineConfig, ScanRecognizer
-    from .simulation.truth import cluster_truth, point_stamps_s, pose_error, true_T_scanner_object
-    from .slam.detections import write_detections_jsonl
+    from .pipeline import PipelineConfig, ScanRecognizer, detect_mission
+    from .slam import write_detections_jsonl
+    from .slam.rundir import DETECTIONS
 
     pipe_cfg = PipelineConfig(descriptor=cfg.descriptor, classifier=cfg.classifier)
     recognizer = ScanRecognizer(db, pipe_cfg, seed=cfg.seed)
     recognizer.warm_up()
-    detections_by_scan: dict[int, list] = {}
-    records = []
-    timings = []
-    best_scan = (-1, None)
-    scans = mission.scans
-    iterator = scans
-    if progress:
-        from tqdm import tqdm
+    records: list[dict] = []
+    best_scan: list = [-1, None]
 
-        iterator = tqdm(scans, desc="recognise", unit="scan", leave=False)
-    for rec in iterator:
-        cloud = mission.load_scan(rec.scan_id)
-        stamps = point_stamps_s(mission, rec, cloud)
-        result = recognizer.recognize(cloud, seed=cfg.seed * 100003 + rec.scan_id, stamp_s=rec.end_stamp_s,
-                                      scan_id=rec.scan_id, point_stamps_s=stamps)
-        timings.append(result.timings_ms)
-        kept = []
-        for k, outcome in enumerate(result.clusters):
-            truth = cluster_truth(mission, cloud, result.segmentation.input_indices(k))
-            row = {"scan_id": rec.scan_id, **outcome.to_dict(), "truth_label": truth.label,
-                   "truth_object": truth.object_index, "truth_purity": truth.purity}
-            det = outcome.detection
-            if det is not None:
-                row["reliable"] = bool(det.reliable)
-                row["fitness"] = det.fitness
-                row["rmse_m"] = det.rmse_m
-                if truth.object_index >= 0 and truth.label == det.label:
-                    err = pose_error(det, true_T_scanner_object(mission, truth.object_index, det.stamp_s),
-                                     db.class_info(det.label).symmetry)
-                    row.update(rotation_error_deg=float(np.degrees(err.rotation_error_rad)),
-                               translation_error_m=err.translation_error_m, pose_nees=err.nees, pose_nees_dof=err.dof)
-                if det.reliable or cfg.use_unreliable:
-                    kept.append(det)
-            records.append(row)
-        if kept:
-            detections_by_scan[rec.scan_id] = kept
-        n_det = len(result.detections)
-        if n_det > best_scan[0]:
-            best_scan = (n_det, (rec.scan_id, cloud, result))
-    write_detections_jsonl(out / "detections.jsonl",
-                           {s: [d for d in ds] for s, ds in detections_by_scan.items()})
-    summary = _recognition_summary(records, timings)
+    def score(rec, cloud, result) -> None:  # the separate pass against the simulator's ground truth
+        records.extend(score_scan(mission, rec, cloud, result, db))
+        if len(result.detections) > best_scan[0]:
+            best_scan[:] = [len(result.detections), (rec.scan_id, cloud, result)]
+
+    found = detect_mission(mission, recognizer, seed=cfg.seed, keep_unreliable=cfg.use_unreliable,
+                           progress=progress, on_scan=score)
+    write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
+    summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})
     if best_scan[1] is not None:
         _write_fig3_data(out / "fig3_scan.npz", *best_scan[1])
-    return {"detections_by_scan": detections_by_scan, "summary": summary, "pipeline_config": pipe_cfg.to_dict()}
-
-
-def _recognition_summary(records: list[dict], timings: list[dict]) -> dict:
-    dets = [r for r in records if r["detected"]]
-    correct = [r for r in dets if r["label"] == r["truth_label"]]
-    objects = [r for r in records if r["truth_object"] >= 0 and r["truth_label"] != "background"]
-    found = [r for r in objects if r["detected"] and r["label"] == r["truth_label"]]
-    background = [r for r in records if r["truth_label"] == "background"]
-    false_accepts = [r for r in background if r["detected"]]
-    rot = np.array([r["rotation_error_deg"] for r in correct if "rotation_error_deg" in r])
-    trans = np.array([r["translation_error_m"] for r in correct if "translation_error_m" in r])
-    nees6 = np.array([r["pose_nees"] for r in correct if r.get("pose_nees_dof") == 6])
-    success = np.array([(r.get("rotation_error_deg", 1e9) < 10 and r.get("translation_error_m", 1e9) < 0.01)
-                        for r in correct]) if correct else np.zeros(0, bool)
-    total_ms = np.array([t["total"] for t in timings]) if timings else np.zeros(0)
-    per_class = {}
-    for lab in sorted({r["truth_label"] for r in objects}):
-        obj = [r for r in objects if r["truth_label"] == lab]
-        per_class[lab] = {"clusters": len(obj), "recognised": sum(r["detected"] and r["label"] == lab for r in obj)}
-    return {
-        "n_scans": len(timings), "n_clusters": len(records), "n_detections": len(dets),
-        "precision": len(correct) / len(dets) if dets else float("nan"),
-        "recall": len(found) / len(objects) if objects else float("nan"),
-        "background_clusters": len(background), "background_false_accepts": len(false_accepts),
-        "per_class": per_class,
-        "pose_median_rotation_error_deg": float(np.median(rot)) if rot.size else float("nan"),
-        "pose_median_translation_error_m": float(np.median(trans)) if trans.size else float("nan"),
-        "pose_success_rate": float(success.mean()) if success.size else float("nan"),
-        "pose_mean_nees_6dof": float(np.mean(nees6)) if nees6.size else float("nan"),
-        "n_reliable": sum(bool(r.get("reliable")) for r in dets),
-        "scan_latency_ms_median": float(np.median(total_ms)) if total_ms.size else float("nan"),
-        "scan_latency_ms_p90": float(np.percentile(total_ms, 90)) if total_ms.size else float("nan"),
-        "stage_ms_median": {k: float(np.median([t.get(k, 0.0) for t in timings])) for k in
-                            ("segmentation", "descriptors", "matching", "pose")} if timings else {},
-    }
+    return {"detections_by_scan": found.detections_by_scan, "summary": summary, "pipeline_config": pipe_cfg.to_dict()}
 
 
 def _write_fig3_data(path: Path, scan_id: int, cloud, result) -> None:
@@ -317,12 +257,15 @@ def _write_fig3_data(path: Path, scan_id: int, cloud, result) -> None:
 
 
 def _run_slam_modes(mission, detections_by_scan: dict, cfg: DemoConfig, out: Path) -> dict:
-    from .slam.runner import run_slam, write_run
+    from .simulation.truth_slam import builtin_symmetries
+    from .slam import run_slam, write_run
+    from .slam.rundir import mode_dir
 
     results = {}
+    symmetries = builtin_symmetries()
     for mode in cfg.modes:
-        res = run_slam(mission, detections_by_scan, mode=mode, seed=cfg.seed)
-        write_run(res, out / "slam" / mode_dirname(mode))
+        res = run_slam(mission, detections_by_scan, mode=mode, seed=cfg.seed, symmetries=symmetries)
+        write_run(res, mode_dir(out, mode))
         results[mode] = res
     return results
 

@@ -20,7 +20,7 @@ from semslam.recognition import (
     load_database,
     save_database,
 )
-from semslam.recognition._synthetic import StandInDescriptors, synthetic_shape_views
+from semslam.experiments.synthetic_views import StandInDescriptors, synthetic_shape_views
 from semslam.symmetry import Symmetry
 
 

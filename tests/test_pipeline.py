@@ -21,7 +21,7 @@ from semslam.recognition.plausibility import (
 def db(tmp_path_factory):
     import os
 
-    from semslam.recognition.builtin import builtin_database
+    from semslam.simulation.builtin_db import builtin_database
 
     os.environ["SEMSLAM_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
     try:

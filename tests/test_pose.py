@@ -12,7 +12,7 @@ from semslam.detection import Detection
 from semslam.errors import RegistrationError
 from semslam.geometry import rpy_from_rotation, wrap_angle
 from semslam.registration import estimate_object_pose, prepare_pose_model
-from semslam.registration._scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+from semslam.experiments.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
 
 
 @pytest.fixture(scope="module")
@@ -104,8 +104,8 @@ def mission_eval():
     """One-loop missions at 1 m altitude (seeds 0, 1): ground-truth clusters, aligned to the models the
     pipeline uses (ScanRecognizer on the built-in database: its pose-model views, fused)."""
     from semslam.pipeline import ScanRecognizer
-    from semslam.recognition.builtin import builtin_database
-    from semslam.registration._pose_eval import evaluate, simulated_clusters
+    from semslam.simulation.builtin_db import builtin_database
+    from semslam.experiments.pose_eval import evaluate, simulated_clusters
 
     clusters = simulated_clusters((0, 1), altitudes_m=(1.0,))
     recognizer = ScanRecognizer(builtin_database(seed=0, cache=False))

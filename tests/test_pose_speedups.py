@@ -250,7 +250,7 @@ def test_pose_internals_reuse_equals_the_separate_computations():
     """_final_scores == _final_score per hypothesis; the final ICP's fitness / RMSE and the nearest points
     it hands to the covariance == the KD-tree's (inlier_statistics) and a fresh query."""
     from semslam.registration import pose as P
-    from semslam.registration._scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+    from semslam.experiments.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
     from semslam.registration.result import inlier_statistics
     from semslam.registration.search import RangeImage
     from semslam.simulation import builtin_objects

@@ -44,7 +44,7 @@ def test_recognize_builtin_json_and_jsonl(scene, cache, tmp_path, capsys):
 
 def test_recognize_text_with_pose_from_a_db_file(scene, cache, tmp_path, capsys):
     from semslam.recognition import save_database
-    from semslam.recognition.builtin import builtin_database
+    from semslam.simulation.builtin_db import builtin_database
 
     db_path = save_database(builtin_database(seed=0), tmp_path / "db.npz")
     assert main(["recognize", str(scene), "--db", str(db_path), "--descriptor", "esf", "--seed", "1"]) == 0

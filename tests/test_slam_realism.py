@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from semslam.simulation import DvlConfig, SimulatorConfig, TrajectoryConfig, simulate_mission
+from semslam.simulation.truth_slam import run_truth_slam
 from semslam.simulation.sensors import gauss_markov
-from semslam.slam.runner import SlamConfig, run_slam
-from semslam.slam.synthetic import square_mission
+from semslam.slam import SlamConfig, run_slam
+from semslam.experiments.synthetic import square_mission
 
 
 def test_gauss_markov_matches_its_analytic_statistics():
@@ -47,19 +48,21 @@ def test_dvl_scale_and_misalignment_are_one_draw_per_mission():
     assert len(set(np.round(ks, 12))) == 3 and max(map(abs, deltas)) < math.radians(15)
 
 
-def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_mission():
+def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_vehicle():
+    """The filter's DVL model comes from the mission's vehicle description (the simulated sensor's
+    specification), never from the simulator's settings: a white DVL gets no calibration states."""
     white = SimulatorConfig(trajectory=TrajectoryConfig(loops=1), dvl=DvlConfig.white())
     a = simulate_mission(white, seed=3, with_scans=False)
     real = simulate_mission(white.replace(dvl=DvlConfig()), seed=3, with_scans=False)
     assert not np.allclose(a.dvl.velocity_body_mps[a.dvl.valid], real.dvl.velocity_body_mps[a.dvl.valid])
     np.testing.assert_array_equal(a.dvl.valid, real.dvl.valid)  # same white draws first
-    cfg_w, cfg_r = SlamConfig.for_mission(a), SlamConfig.for_mission(real)
-    assert not cfg_w.dvl_calibration and cfg_r.dvl_calibration
-    assert cfg_r.dvl_bias_sigma_mps == DvlConfig().bias_sigma_mps
-    assert cfg_r.dvl_slope_noise_factor == DvlConfig().slope_noise_factor
+    assert a.vehicle.dvl.bias_sigma_mps == 0 and a.vehicle.dvl.scale_factor_sigma == 0
+    assert real.vehicle.dvl.bias_sigma_mps == DvlConfig().bias_sigma_mps
+    assert real.vehicle.dvl.degraded_noise_factor == DvlConfig().slope_noise_factor
+    assert run_truth_slam(a, mode="dr", seed=5).dvl_calibration is None  # no calibration states to estimate
     # the same seed gives the same initial error in every mode, drawn from the configured sigma
-    r_dr = run_slam(real, mode="dr", seed=5)
-    r_pose = run_slam(real, mode="pose", seed=5)
+    r_dr = run_truth_slam(real, mode="dr", seed=5)
+    r_pose = run_truth_slam(real, mode="pose", seed=5)
     np.testing.assert_array_equal(r_dr.position_ned_m[0], r_pose.position_ned_m[0])
     assert 0.0 < np.linalg.norm(r_dr.position_ned_m[0] - r_dr.truth_position_ned_m[0]) < 5 * 0.01 * math.sqrt(3)
     assert r_dr.dvl_calibration.shape == (len(r_dr.stamps_s), 8)
@@ -69,29 +72,29 @@ def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_mission():
 def test_surveyed_landmark_makes_a_constant_yaw_bias_observable():
     bias = math.radians(2.0)
     m = square_mission(seed=2, loops=2, yaw_bias_rad=bias)
-    cfg = SlamConfig.for_mission(m, surveyed_objects=("reducing_socket_0",))
-    pose = run_slam(m, mode="pose", config=cfg, seed=2, symmetries={})
-    head = run_slam(m, mode="pose+heading", config=cfg, seed=2, symmetries={})
+    cfg = SlamConfig(surveyed_objects=("reducing_socket_0",))
+    pose = run_truth_slam(m, mode="pose", config=cfg, seed=2, symmetries={})
+    head = run_truth_slam(m, mode="pose+heading", config=cfg, seed=2, symmetries={})
     assert head.yaw_bias_rad[-1] == pytest.approx(bias, abs=math.radians(0.8))  # from ~0 (prior mean)
     assert head.metrics["ate_rmse_m"] < 0.8 * pose.metrics["ate_rmse_m"]
     assert head.metrics["nees_position_mean"] < 6.0 < pose.metrics["nees_position_mean"]
-    free = run_slam(m, mode="pose+heading", seed=2, symmetries={})  # no reference: the bias stays at its prior
+    free = run_truth_slam(m, mode="pose+heading", seed=2, symmetries={})  # no reference: the bias stays at its prior
     assert abs(free.yaw_bias_rad[-1]) < math.radians(1.0)
     with pytest.raises(Exception, match="surveyed_objects"):
-        run_slam(m, mode="pose", config=SlamConfig.for_mission(m, surveyed_objects=("nothing",)), seed=0)
+        run_truth_slam(m, mode="pose", config=SlamConfig(surveyed_objects=("nothing",)), seed=0)
 
 
 def test_observability_constraint_keeps_a_constant_yaw_bias_unobservable():
     # without surveyed landmarks a constant yaw bias is unobservable (rotating trajectory + map about the
     # start and shifting the bias changes no measurement): the constrained filter gains no information on it
     # and leaves its estimate at the prior, the plain EKF gains spurious information and wanders
-    from semslam.slam.synthetic import square_mission
+    from semslam.experiments.synthetic import square_mission
 
     m = square_mission(seed=4, loops=2)
     runs = {}
     for oc in (True, False):
-        cfg = SlamConfig.for_mission(m, observability_constrained=oc)
-        runs[oc] = run_slam(m, mode="pose+heading", config=cfg, seed=0, symmetries={})
+        cfg = SlamConfig(observability_constrained=oc)
+        runs[oc] = run_truth_slam(m, mode="pose+heading", config=cfg, seed=0, symmetries={})
     prior = SlamConfig().yaw_bias_sigma_rad ** 2
     np.testing.assert_allclose(runs[True].yaw_bias_var_rad2, prior, rtol=1e-9)
     assert np.abs(runs[True].yaw_bias_rad).max() < 1e-9

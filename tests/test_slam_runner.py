@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from semslam.cli.main import main
+from semslam.simulation.truth_slam import run_truth_slam
 from semslam.errors import SlamError
 from semslam.geometry import rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
@@ -18,14 +19,10 @@ from semslam.slam.consensus import (
     attitude_distance,
     quaternion_mean,
 )
-from semslam.slam.detections import (
-    TruthDetectionConfig,
-    read_detections_jsonl,
-    simulate_detections,
-    write_detections_jsonl,
-)
-from semslam.slam.runner import SlamConfig, run_slam
-from semslam.slam.synthetic import square_mission
+from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
+from semslam.slam.detections import read_detections_jsonl, write_detections_jsonl
+from semslam.slam import SlamConfig, run_slam
+from semslam.experiments.synthetic import square_mission
 
 
 def test_consensus_rejects_minority_outlier():
@@ -65,7 +62,7 @@ def mission():
 
 
 def test_pose_slam_maps_every_object_and_bounds_the_error(mission):
-    res = run_slam(mission, mode="pose", seed=4, symmetries={})
+    res = run_truth_slam(mission, mode="pose", seed=4, symmetries={})
     mt = res.metrics
     assert mt["n_objects_mapped"] == 4 and mt["n_landmarks"] == 4
     assert mt["landmark_position_error_max_m"] < 0.1
@@ -73,7 +70,7 @@ def test_pose_slam_maps_every_object_and_bounds_the_error(mission):
     assert mt["landmark_updates"]["pose"] > 20
     assert mt["fraction_within_3sigma"] > 0.95
     assert mt["cross_class_updates"] == 0 and mt["wrong_object_updates"] == 0
-    dr = run_slam(mission, mode="dr", seed=4, symmetries={})
+    dr = run_truth_slam(mission, mode="dr", seed=4, symmetries={})
     s_dr = 3 * np.sqrt(dr.position_cov_m2[:, 0, 0] + dr.position_cov_m2[:, 1, 1])   # horizontal 3-sigma
     s_pose = 3 * np.sqrt(res.position_cov_m2[:, 0, 0] + res.position_cov_m2[:, 1, 1])
     assert np.all(np.diff(s_dr) > -1e-9) and s_dr[-1] > 1.5 * s_dr[0]  # dead reckoning: the bound only grows
@@ -82,8 +79,8 @@ def test_pose_slam_maps_every_object_and_bounds_the_error(mission):
 
 def test_class_gate_prevents_cross_class_association(mission):
     # every detection relabelled to one other class half of the time: still never a cross-class update
-    cfg = SlamConfig.for_mission(mission, detections={"misclassification_rate": 0.3, "p_detect": 1.0})
-    res = run_slam(mission, mode="pose", config=cfg, seed=1, symmetries={})
+    res = run_truth_slam(mission, mode="pose", seed=1, symmetries={},
+                         detection_config={"misclassification_rate": 0.3, "p_detect": 1.0})
     ups = [r for r in res.update_log if r["kind"] == "landmark" and r.get("accepted")]
     assert ups and all(r["label"] == r["landmark_label"] for r in ups)
     labels = {lm.landmark_id: lm.label for lm in res.landmarks}
@@ -99,9 +96,9 @@ def test_class_gate_prevents_cross_class_association(mission):
 def test_fault_cases_do_not_diverge():
     m = square_mission(seed=7, loops=2, dvl_dropout_prob=0.2, dvl_outlier_prob=0.05, dvl_outlier_std_mps=0.3,
                        extra_objects=1)
-    cfg = SlamConfig.for_mission(m, detections={"false_rate": 0.1, "misclassification_rate": 0.05})
     for mode in ("dr", "pose", "pose+heading"):
-        res = run_slam(m, mode=mode, config=cfg, seed=7, symmetries={})
+        res = run_truth_slam(m, mode=mode, seed=7, symmetries={},
+                             detection_config={"false_rate": 0.1, "misclassification_rate": 0.05})
         mt = res.metrics
         assert np.isfinite(res.position_ned_m).all() and np.isfinite(res.position_cov_m2).all()
         assert mt["max_position_error_m"] < 0.3, mode
@@ -136,7 +133,7 @@ def test_cli_slam_end_to_end(tmp_path, capsys):
 
 
 def test_montecarlo_reports_anees_band(tmp_path):
-    from semslam.slam.montecarlo import run_montecarlo, write_montecarlo
+    from semslam.experiments.montecarlo import run_montecarlo, write_montecarlo
 
     res = run_montecarlo(2, modes=("dr", "pose"), seed=0, source="synthetic", loops=1)
     s = res.summary
@@ -149,7 +146,7 @@ def test_montecarlo_reports_anees_band(tmp_path):
 
 
 def test_montecarlo_pairs_each_mode_with_its_baseline_on_the_same_missions():
-    from semslam.slam.montecarlo import run_montecarlo
+    from semslam.experiments.montecarlo import run_montecarlo
 
     res = run_montecarlo(3, modes=("dr", "position", "pose"), seed=4, source="synthetic", loops=1)
     ate = {m: np.array([r["ate_rmse_m"] for r in res.run_metrics[m]]) for m in res.modes}
@@ -187,17 +184,25 @@ def test_each_detection_is_processed_at_its_own_stamp(mission):
 
 
 def test_interpolated_attitude_noise_is_scaled(mission):
-    from semslam.slam.runner import _Runner
+    """The streamed attitude input against numpy's unwrap + interp over the whole log (a wrong unwrap near
+    +-pi, a wrong interpolation weight or variance factor fails it)."""
+    from semslam.slam.sensors import AttitudeInput
 
-    r = _Runner(mission, SlamConfig.for_mission(mission), "pose", {}, np.random.default_rng(0))
-    ts = r._att_t
+    r = AttitudeInput(mission.vehicle.attitude.noise_rpy_rad)
+    for t, a in zip(mission.attitude.stamp_s, mission.attitude.rpy_rad):
+        r.add(t, a)
+    ts = mission.attitude.stamp_s
+    unwrapped = np.unwrap(mission.attitude.rpy_rad, axis=0)
     mid = 0.5 * (ts[10] + ts[11])
-    rpy, f = r.attitude_at(mid)
-    np.testing.assert_allclose(rpy, [np.interp(mid, ts, r._att[:, i]) for i in range(3)], atol=1e-15)
+    rpy, f = r.at(mid)
+    np.testing.assert_allclose(rpy, [np.interp(mid, ts, unwrapped[:, i]) for i in range(3)], atol=1e-15)
+    k = len(ts) - 3  # late in the run, after several turns: the unwrap must match numpy's exactly
+    np.testing.assert_allclose(r.at(ts[k])[0], unwrapped[k], rtol=0, atol=1e-12)
+    assert abs(unwrapped[k, 2]) > 2 * np.pi  # several turns: the unwrap was exercised
     assert f == pytest.approx(0.5)  # the mean of two independent samples: half the variance
-    assert r.attitude_at(ts[10])[1] == pytest.approx(1.0)
-    assert r.attitude_at(ts[0] - 1.0)[1] == 1.0 and r.attitude_at(ts[-1] + 1.0)[1] == 1.0
-    np.testing.assert_allclose(r.attitude_cov_world(rpy, f), 0.5 * r.attitude_cov_world(rpy), rtol=1e-12)
+    assert r.at(ts[10])[1] == pytest.approx(1.0)
+    assert r.at(ts[0] - 1.0)[1] == 1.0 and r.at(ts[-1] + 1.0)[1] == 1.0
+    np.testing.assert_allclose(r.cov_world(rpy, f), 0.5 * r.cov_world(rpy), rtol=1e-12)
 
 
 def test_cli_montecarlo_rejects_a_bad_launch_sigma(capsys):
@@ -209,9 +214,9 @@ def test_cli_montecarlo_rejects_a_bad_launch_sigma(capsys):
 
 
 def test_drift_since_matches_brownian_motion_oracle():
-    """``_drift_since`` against the exact covariance of ``mean_i (W_T - W_ti)`` for a Brownian motion
+    """``drift_since`` against the exact covariance of ``mean_i (W_T - W_ti)`` for a Brownian motion
     (``cov(W_s, W_t) = min(s, t)``), per axis with different rates, built as ``a^T Sigma a``."""
-    from semslam.slam.runner import _drift_since
+    from semslam.slam.mapping import drift_since as _drift_since
 
     t_obs = np.array([1.0, 1.7, 2.2, 3.9])
     T = 5.0
@@ -232,11 +237,10 @@ def test_a_landmark_initialised_while_the_vehicle_drifts_is_not_mapped_twice():
     stamps; without the drift term the new landmark looked 2x more precise relative to the vehicle than it was,
     the next detections failed the gate, and their stale candidates made a duplicate valve 43 s later
     (landmark NEES 70)."""
-    from semslam.slam.montecarlo import make_mission
+    from semslam.experiments.montecarlo import make_mission
 
     m = make_mission(12)
-    if m.truth is None or not m.objects:  # pragma: no cover - the simulator is part of the package
-        pytest.skip("needs the simulator")
-    r = run_slam(m, None, mode="pose", seed=12, config=SlamConfig.for_mission(m, smooth=False))
+    assert m.truth is not None and m.objects  # the simulator is part of the package: never a skip
+    r = run_truth_slam(m, mode="pose", seed=12, config=SlamConfig(smooth=False))
     assert sorted(lm.label for lm in r.landmarks) == sorted(o.label for o in m.objects)
     assert all(lm.position_error_m < 0.05 for lm in r.landmarks)

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from semslam.geometry import rotation_from_rpy
+from semslam.simulation.truth_slam import run_truth_slam
 from semslam.slam.ekf import SemanticEkf
-from semslam.slam.runner import SlamConfig, run_slam, write_run
+from semslam.slam import SlamConfig, run_slam, write_run
 from semslam.slam.smoother import RtsRecorder
-from semslam.slam.synthetic import square_mission
+from semslam.experiments.synthetic import square_mission
 
 
 def _script(seed=0, n_steps=120):
@@ -108,8 +109,8 @@ def test_recording_leaves_the_filter_unchanged():
 
 def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_path):
     mission = square_mission(seed=2, loops=2)
-    off = run_slam(mission, mode="pose", config=SlamConfig.for_mission(mission, smooth=False), seed=2)
-    on = run_slam(mission, mode="pose", seed=2)
+    off = run_truth_slam(mission, mode="pose", config=SlamConfig(smooth=False), seed=2)
+    on = run_truth_slam(mission, mode="pose", seed=2)
     np.testing.assert_array_equal(off.position_ned_m, on.position_ned_m)
     assert off.smoothed_position_ned_m is None and "smoother" not in off.metrics
     sm = on.metrics["smoother"]
@@ -128,7 +129,7 @@ def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_
 
 def test_smoother_over_budget_is_skipped_and_says_so(tmp_path):
     mission = square_mission(seed=1, loops=1)
-    res = run_slam(mission, mode="pose", config=SlamConfig.for_mission(mission, smoother_max_mb=0.01), seed=1)
+    res = run_truth_slam(mission, mode="pose", config=SlamConfig(smoother_max_mb=0.01), seed=1)
     assert res.metrics["smoother"]["status"].startswith("skipped")
     assert "ate_rmse_m" not in res.metrics["smoother"]
     assert res.smoothed_position_ned_m is None

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import read_point_cloud
     from ..pipeline import PipelineConfig, ScanRecognizer
     from ..recognition import load_database
-    from ..recognition.builtin import builtin_database
+    from ..simulation.builtin_db import builtin_database
     from ._output import emit, to_jsonable
 
     t0 = time.perf_counter()

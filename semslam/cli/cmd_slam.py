@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 MODE_CHOICES = ("dr", "position", "pose", "pose+heading", "all")
@@ -16,8 +15,12 @@ def register(subparsers, common) -> None:
     p.add_argument("mission", help="mission directory, or synthetic:SEED for the built-in analytic square mission")
     p.add_argument("--mode", choices=MODE_CHOICES, default="pose", help="filter mode (all: one sub-directory per mode)")
     p.add_argument("--out", required=True, help="run directory to write")
-    p.add_argument("--detections", help="JSON lines of Detection.to_dict() (default: truth-based detections)")
-    p.add_argument("--config", help="JSON file of SlamConfig fields overriding the defaults")
+    p.add_argument("--detections", help="JSON lines of Detection.to_dict(), e.g. from `semslam detect` (default, or "
+                                        "'truth': truth-based detections simulated from the dataset's ground truth)")
+    p.add_argument("--config", help="TOML or JSON file of SlamConfig fields (a [slam] table, or the fields at the top); "
+                                    "a run's config.json repeats it exactly")
+    p.add_argument("--vehicle", help="vehicle description (TOML) replacing the dataset's; 'girona500' for the defaults")
+    p.add_argument("--db", help="view database whose class symmetries the map uses (default: the built-in objects')")
     p.add_argument("--seed", type=int, default=0, help="seed of the truth-based detections (default 0)")
     p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
                    help="name of a mission object whose pose is known a priori (surveyed reference structure); repeatable")
@@ -47,50 +50,44 @@ def register(subparsers, common) -> None:
     q.set_defaults(func=run_montecarlo_cmd)
 
 
-def _load_mission(spec: str):
-    from ..errors import InputError
-
-    if spec.startswith("synthetic:"):
-        from ..slam.synthetic import square_mission
-
-        try:
-            seed = int(spec.split(":", 1)[1])
-        except ValueError:
-            raise InputError(f"The MISSION argument must be a directory or synthetic:SEED. Got {spec!r} instead.") from None
-        return square_mission(seed=seed)
-    path = Path(spec)
-    if not path.is_dir():
-        raise InputError(f"The MISSION argument must be an existing mission directory or synthetic:SEED. Got {spec!r} instead.")
-    from ..simulation.mission_io import read_mission
-
-    return read_mission(path)
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
-    from ..slam.detections import read_detections_jsonl
-    from ..slam.runner import MODES, SlamConfig, run_slam, write_run
+    from ..errors import InputError
+    from ..slam import MODES, SlamConfig, read_detections_jsonl, run_slam, write_run
+    from ..slam.rundir import mode_dir
+    from ._inputs import load_dataset, read_config_file
     from ._output import emit
 
-    mission = _load_mission(args.mission)
-    overrides = {}
-    if args.config:
-        try:
-            overrides = json.loads(Path(args.config).read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ConfigError(f"The --config file {args.config!r} cannot be read as JSON: {exc}") from None
-        if not isinstance(overrides, dict):
-            raise ConfigError(f"The --config file {args.config!r} must hold a JSON object. Got {type(overrides).__name__} instead.")
+    mission = load_dataset(args.mission, args.vehicle)
+    overrides = read_config_file(args.config) if args.config else {}
+    overrides = dict(overrides.get("slam", overrides))
     if args.surveyed:
         overrides["surveyed_objects"] = tuple(args.surveyed)
-    cfg = SlamConfig.for_mission(mission, **overrides)
-    dets = read_detections_jsonl(args.detections) if args.detections else None
+    cfg = SlamConfig.from_dict(overrides, source=f"the --config file {args.config!r}" if args.config else "the options")
+    dets = None
+    if args.detections and args.detections != "truth":
+        dets = read_detections_jsonl(args.detections)
+    elif mission.truth is None or not mission.objects:
+        raise InputError("The dataset has no ground truth to simulate detections from: give --detections FILE "
+                         "(from `semslam detect`).")
+    if args.db:
+        from ..recognition import load_database
+
+        symmetries = load_database(args.db).symmetries()
+    else:
+        from ..simulation.truth_slam import builtin_symmetries
+
+        symmetries = builtin_symmetries()
     modes = MODES if args.mode == "all" else (args.mode,)
     out = Path(args.out)
     payload = {}
     for mode in modes:
-        res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed)
-        write_run(res, out / mode.replace("+", "_") if len(modes) > 1 else out)
+        if dets is None:
+            from ..simulation.truth_slam import run_truth_slam
+
+            res = run_truth_slam(mission, mode=mode, config=cfg, seed=args.seed)
+        else:
+            res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries)
+        write_run(res, mode_dir(out, mode) if len(modes) > 1 else out)
         payload[mode] = res.metrics
 
     def text() -> str:
@@ -110,8 +107,8 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     import sys
 
     from ..errors import InputError
-    from ..slam.montecarlo import run_montecarlo, write_montecarlo
-    from ..slam.runner import MODES
+    from ..experiments.montecarlo import run_montecarlo, write_montecarlo
+    from ..slam import MODES
     from ._output import emit
 
     modes = MODES if args.mode == "all" else (args.mode,)

@@ -189,6 +189,10 @@ class ViewDatabase:
         except KeyError:
             raise DatabaseError(f"The class {label!r} is not in the database. Known classes: {', '.join(self.classes)}.") from None
 
+    def symmetries(self) -> dict:
+        """``{class: Symmetry}``: what SLAM needs to know of each class (:func:`semslam.slam.run_slam`)."""
+        return {c: info.symmetry for c, info in self.class_infos.items()}
+
     def views_of(self, label: str) -> np.ndarray:
         """Indices of the views of class ``label`` (int array)."""
         self.class_info(label)

@@ -12,8 +12,8 @@ from .config import (
                      WorldConfig,
 )
 from .kinect import acquire_views, builtin_view_clouds, kinect_view
-from .mission import AhrsLog, DepthLog, DvlLog, Mission, ObjectTruth, ScanRecord, VehicleTruth
-from .mission_io import read_mission, write_mission
+from ..dataset import AhrsLog, AttitudeLog, DepthLog, DvlLog, Mission, ObjectTruth, ScanRecord, VehicleTruth
+from ..dataset import read_mission, write_mission
 from .objects import BUILTIN_LABELS, ObjectModel, builtin_objects, load_object, make_object
 from .scanner import LaserScanner, ScanResult
 from .simulate import MISSION_FORMAT_VERSION, simulate_mission

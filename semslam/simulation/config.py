@@ -256,6 +256,8 @@ class DvlConfig(_Dict):
     slope_outlier_prob: float = 0.05
     beam_angle_rad: float = math.radians(30.0)
     max_altitude_m: float = 30.0
+    #: white noise of each beam's slant range to the bottom (m), written like a real DVL's per-beam data
+    range_noise_m: float = 0.01
     scale_factor_sigma: float = 0.005
     misalignment_sigma_rad: float = math.radians(0.5)
     bias_sigma_mps: float = 0.003
@@ -265,7 +267,7 @@ class DvlConfig(_Dict):
 
     def __post_init__(self) -> None:
         _check(self, positive=("rate_hz", "slope_noise_factor", "max_altitude_m", "bias_tau_s", "slope_bias_tau_s"),
-               nonneg=("noise_rel", "noise_abs_mps", "outlier_std_mps", "beam_angle_rad", "scale_factor_sigma",
+               nonneg=("noise_rel", "noise_abs_mps", "outlier_std_mps", "beam_angle_rad", "range_noise_m", "scale_factor_sigma",
                        "misalignment_sigma_rad", "bias_sigma_mps", "slope_bias_sigma_mps"),
                prob=("dropout_prob", "outlier_prob", "slope_dropout_prob", "slope_outlier_prob"))
 

@@ -8,9 +8,12 @@ import numpy as np
 
 from ..geometry import rotations_from_rpy, wrap_angle
 from .config import AhrsConfig, DepthConfig, DvlConfig, WorldConfig
-from .mission import AhrsLog, DepthLog, DvlLog
+from ..dataset import AttitudeLog, DepthLog, DvlLog
 from .trajectory import Trajectory
 from .world import floor_depth_m, over_slope
+
+#: beam azimuths of the simulated Janus DVL in its (= the body) frame, degrees
+DVL_BEAM_AZIMUTHS_DEG = (45.0, 135.0, 225.0, 315.0)
 
 
 def sensor_stamps(rate_hz: float, duration_s: float) -> np.ndarray:
@@ -19,14 +22,36 @@ def sensor_stamps(rate_hz: float, duration_s: float) -> np.ndarray:
     return np.arange(n) / rate_hz
 
 
+def _beam_directions(position_ned_m: np.ndarray, rpy_rad: np.ndarray, beam_angle_rad: float) -> np.ndarray:
+    """(N, 4, 3) world directions of the four Janus beams (azimuths 45 + k 90 degrees in the body frame)."""
+    az = np.radians(DVL_BEAM_AZIMUTHS_DEG)
+    beams_body = np.column_stack([np.sin(beam_angle_rad) * np.cos(az), np.sin(beam_angle_rad) * np.sin(az),
+                                  np.full(4, np.cos(beam_angle_rad))])
+    return np.einsum("nij,bj->nbi", rotations_from_rpy(rpy_rad), beams_body)
+
+
+def dvl_beam_ranges(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.ndarray,
+                    beam_angle_rad: float) -> np.ndarray:
+    """(N, 4) slant range (m) of each beam to the tank's floor or sloped sides (bisection on the floor's
+    height along the beam, to 0.1 mm): what a real DVL reports per beam."""
+    beams = _beam_directions(position_ned_m, rpy_rad, beam_angle_rad)
+    p = position_ned_m[:, None, :]
+    down = np.maximum(beams[..., 2], 1e-3)
+    hi = np.maximum((world.tank_depth_m - position_ned_m[:, 2])[:, None] / down, 0.0)  # to the flat floor plane
+    lo = np.zeros_like(hi)
+    for _ in range(40):  # the floor is never below the flat plane: the crossing lies in [0, hi]
+        mid = 0.5 * (lo + hi)
+        q = p + beams * mid[..., None]
+        below = q[..., 2] >= floor_depth_m(world, q[..., 0], q[..., 1])
+        hi = np.where(below, mid, hi)
+        lo = np.where(below, lo, mid)
+    return 0.5 * (lo + hi)
+
+
 def dvl_beams_over_slope(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.ndarray, beam_angle_rad: float) -> np.ndarray:
     """True where any of the four Janus beams (azimuths 45 + k 90 degrees in the body frame,
     ``beam_angle_rad`` from the body z axis) reaches the floor on a slope (flat-floor approximation)."""
-    az = np.radians([45.0, 135.0, 225.0, 315.0])
-    beams_body = np.column_stack([np.sin(beam_angle_rad) * np.cos(az), np.sin(beam_angle_rad) * np.sin(az),
-                                  np.full(4, np.cos(beam_angle_rad))])
-    R = rotations_from_rpy(rpy_rad)
-    beams = np.einsum("nij,bj->nbi", R, beams_body)  # (N, 4, 3) world directions
+    beams = _beam_directions(position_ned_m, rpy_rad, beam_angle_rad)
     down = np.maximum(beams[..., 2], 1e-3)
     altitude = floor_depth_m(world, position_ned_m[:, 0], position_ned_m[:, 1]) - position_ned_m[:, 2]
     reach = altitude[:, None] / down  # range to the flat floor plane
@@ -75,10 +100,14 @@ def simulate_dvl(traj: Trajectory, world: WorldConfig, cfg: DvlConfig, rng: np.r
     v_sys = (1.0 + k) * np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1], v[:, 2]]) + bias
     meas = v_sys + noise + np.where(outlier[:, None], spikes, 0.0)
     meas[~valid] = np.nan
-    return DvlLog(t, meas, valid)
+    # per-beam slant ranges (drawn last: the velocity draws are those of a DVL without range output)
+    ranges = dvl_beam_ranges(world, truth.position_ned_m, truth.rpy_rad, cfg.beam_angle_rad)
+    ranges = np.maximum(ranges + rng.normal(0.0, cfg.range_noise_m, ranges.shape), 1e-3)
+    ranges[~valid] = np.nan
+    return DvlLog(t, meas, valid, ranges)
 
 
-def simulate_ahrs(traj: Trajectory, cfg: AhrsConfig, rng: np.random.Generator) -> AhrsLog:
+def simulate_ahrs(traj: Trajectory, cfg: AhrsConfig, rng: np.random.Generator) -> AttitudeLog:
     """AHRS log: true roll, pitch, yaw + white noise + yaw bias (constant plus random walk), wrapped."""
     t = sensor_stamps(cfg.rate_hz, traj.duration_s)
     truth = traj.sample(t)
@@ -88,7 +117,7 @@ def simulate_ahrs(traj: Trajectory, cfg: AhrsConfig, rng: np.random.Generator) -
     bias = cfg.yaw_bias_rad + np.cumsum(walk_steps)
     rpy = truth.rpy_rad + noise
     rpy[:, 2] += bias
-    return AhrsLog(t, wrap_angle(rpy))
+    return AttitudeLog(t, wrap_angle(rpy))
 
 
 def simulate_depth(traj: Trajectory, cfg: DepthConfig, rng: np.random.Generator) -> DepthLog:

@@ -1,4 +1,4 @@
-"""Orchestration: world + trajectory + navigation sensors + laser scans -> :class:`Mission`.
+"""Orchestration: world + trajectory + navigation sensors + laser scans -> :class:`~semslam.dataset.Dataset`.
 
 Randomness: one :class:`numpy.random.SeedSequence` from ``seed`` is split into independent streams for
 the world, the trajectory, the DVL, the AHRS, the depth sensor and the scanner, so that turning scans
@@ -18,15 +18,15 @@ from ..errors import SimulationError
 from ..geometry import RigidTransform
 from ._ray_kernels import RayCaster
 from .config import SimulatorConfig
-from .mission import Mission, ScanRecord, VehicleTruth
+from ..dataset import FORMAT_VERSION, Dataset, ScanRecord, VehicleTruth, vehicle_from_simulator_dict
 from .objects import builtin_objects
 from .scanner import LaserScanner
 from .sensors import sensor_stamps, simulate_ahrs, simulate_depth, simulate_dvl
 from .trajectory import Trajectory
 from .world import World, build_world
 
-#: Version of the mission format written by :mod:`semslam.simulation.mission_io`.
-MISSION_FORMAT_VERSION = 1
+#: Version of the mission format written by :func:`semslam.dataset.write_mission`.
+MISSION_FORMAT_VERSION = FORMAT_VERSION
 #: Time between scan starts (s); a scan lasts 1 / scan_rate_hz.
 DEFAULT_SCAN_INTERVAL_S = 0.5
 
@@ -53,7 +53,7 @@ def mission_trajectory(world: World, config: SimulatorConfig, rng: np.random.Gen
 
 
 def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
-                     scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False) -> Mission:
+                     scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False) -> Dataset:
     """Simulate a whole mission.
 
     Parameters
@@ -69,8 +69,8 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
 
     Returns
     -------
-    Mission
-        Sensor logs, 50 Hz truth, object truths, scan records (``path`` = ``scans/scan_NNNNN.pcd``) and
+    Dataset
+        The vehicle description (the simulated sensors' specification), sensor logs, 50 Hz truth, object truths, scan records (``path`` = ``scans/scan_NNNNN.pcd``) and
         the in-memory clouds (``mission.load_scan(scan_id)``, frame ``"scanner"``).
     """
     config = SimulatorConfig() if config is None else config
@@ -91,10 +91,9 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     records, clouds = [], {}
     if with_scans:
         records, clouds = _simulate_scans(world, traj, scanner, config, scan_interval_s, rngs["scanner"], progress)
+    sim_dict = config.to_dict()
     cfg_dict = {
-        "format_version": MISSION_FORMAT_VERSION,
-        "seed": seed,
-        "simulator": config.to_dict(),
+        "simulator": sim_dict,
         "scan_interval_s": scan_interval_s,
         "with_scans": bool(with_scans),
         "frames": {
@@ -106,9 +105,9 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
         },
         "units": {"length": "m", "angle": "rad", "time": "s", "velocity": "m/s"},
     }
-    return Mission(config=cfg_dict, T_vehicle_scanner=scanner.T_vehicle_scanner, dvl=dvl, ahrs=ahrs, depth=depth,
-                   truth=truth, objects=list(world.objects), scans=records, directory=None, seed=seed,
-                   scan_clouds=clouds if with_scans else None)
+    vehicle = vehicle_from_simulator_dict(sim_dict, scanner.T_vehicle_scanner)
+    return Dataset(vehicle, dvl, ahrs, depth, truth, list(world.objects), records, cfg_dict, None, seed,
+                   clouds if with_scans else None)
 
 
 def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,

@@ -16,23 +16,10 @@ from ..detection import Detection
 from ..errors import MissionError
 from ..geometry import RigidTransform
 from ..symmetry import Symmetry
-from .mission import Mission, ScanRecord
+from ..dataset import Mission, ScanRecord
 from .simulate import T_world_scanner_at
 
 BACKGROUND = "background"
-
-
-def point_stamps_s(mission: Mission, record: ScanRecord, cloud: PointCloud) -> np.ndarray | None:
-    """Acquisition stamp of every point of a scan, from its ``line`` field (None if the scan has none)."""
-    if "line" not in cloud.fields:
-        return None
-    try:
-        n_lines = int(mission.config["simulator"]["scanner"]["n_lines"])
-    except (KeyError, TypeError, ValueError):
-        raise MissionError("mission.json has no simulator.scanner.n_lines: cannot time the scan lines") from None
-    line = np.asarray(cloud.fields["line"], dtype=float)
-    step = (record.end_stamp_s - record.start_stamp_s) / max(n_lines - 1, 1)
-    return record.start_stamp_s + line * step
 
 
 def true_T_scanner_object(mission: Mission, object_index: int, stamp_s: float) -> RigidTransform:

@@ -15,7 +15,7 @@ import trimesh
 
 from ..geometry import RigidTransform, rotation_from_rpy
 from .config import WorldConfig
-from .mission import ObjectTruth
+from ..dataset import ObjectTruth
 from .objects import ObjectModel, _resting
 
 #: Order in which the vehicle visits the fittings (the papers' route: socket, elbow, tee, valve).

@@ -1,22 +1,28 @@
-"""semslam.slam: the semantic EKF-SLAM of Himri et al. (2018, 2019) and its evaluation.
+"""semslam.slam: the semantic EKF-SLAM of Himri et al. (2018, 2019), fed by detections and navigation.
 
-``run_slam(mission, detections_by_scan | None, *, mode, config, seed) -> SlamResult`` is the entry point;
-``run_montecarlo`` evaluates the modes over seeded missions.
+``SlamSession`` takes messages as they come (streaming); ``run_slam(dataset, detections_by_scan, *, mode,
+config, seed) -> SlamResult`` is the loop over a whole :class:`~semslam.dataset.Dataset`; ``write_run`` writes a
+run directory (:mod:`semslam.slam.rundir`). Modules: ``session`` (time and events), ``sensors`` (attitude
+input, DVL, depth models), ``mapping`` (association, landmark updates, consensus initialisation), ``ekf`` (the
+filter and its named state blocks), ``smoother`` (RTS), ``evaluation`` (against ground truth).
 """
 
 from .association import ObjectMeasurement, associate, associate_jcbb, innovation, measurement_from_detection
+from .config import MODES, SlamConfig
 from .consensus import ConsensusInitializer, Observation, attitude_distance, quaternion_mean
-from .detections import TruthDetectionConfig, read_detections_jsonl, simulate_detections, write_detections_jsonl
+from .detections import read_detections_jsonl, write_detections_jsonl
 from .ekf import SemanticEkf
+from .evaluation import evaluate_landmark, evaluate_run
 from .metrics import anees, chi2_band, nees, trajectory_metrics
-from .montecarlo import MonteCarloResult, run_montecarlo, write_montecarlo
-from .runner import MODES, LandmarkEstimate, SlamConfig, SlamResult, run_slam, write_run
+from .results import LandmarkEstimate, SlamEstimate, SlamResult
+from .rundir import write_run
+from .runner import merged_messages, run_slam
+from .session import SlamSession
 
 __all__ = [
     "ObjectMeasurement", "associate", "associate_jcbb", "innovation", "measurement_from_detection",
-    "ConsensusInitializer", "Observation", "attitude_distance", "quaternion_mean",
-    "TruthDetectionConfig", "read_detections_jsonl", "simulate_detections", "write_detections_jsonl",
-    "SemanticEkf", "anees", "chi2_band", "nees", "trajectory_metrics",
-    "MonteCarloResult", "run_montecarlo", "write_montecarlo",
-    "MODES", "LandmarkEstimate", "SlamConfig", "SlamResult", "run_slam", "write_run",
+    "MODES", "SlamConfig", "ConsensusInitializer", "Observation", "attitude_distance", "quaternion_mean",
+    "read_detections_jsonl", "write_detections_jsonl", "SemanticEkf", "evaluate_landmark", "evaluate_run",
+    "anees", "chi2_band", "nees", "trajectory_metrics", "LandmarkEstimate", "SlamEstimate", "SlamResult",
+    "write_run", "merged_messages", "run_slam", "SlamSession",
 ]

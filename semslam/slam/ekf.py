@@ -113,6 +113,38 @@ class SemanticEkf:
             N[lm.offset + 5] = 1.0
         self._N = N
 
+    # ------------------------------------------------------------------ named state blocks
+    def indices(self, block: str) -> np.ndarray:
+        """Global state indices of a named block of the vehicle state: ``position`` (3, world NED, m),
+        ``velocity`` (3, body, m/s), ``dvl_calibration`` (8: bias (3), degraded-bottom bias (3) (m/s), scale
+        factor, misalignment (rad)) and ``yaw_bias`` (1, rad); the optional blocks raise when absent."""
+        if block == "position":
+            return np.arange(0, 3)
+        if block == "velocity":
+            return np.arange(3, 6)
+        if block == "dvl_calibration" and self.dvl_calibration:
+            return np.arange(self.i_dvl, self.i_dvl + 8)
+        if block == "yaw_bias" and self.yaw_bias:
+            return np.array([self.i_yaw])
+        raise SlamError(f"The 'block' argument of SemanticEkf.indices must be one of position, velocity"
+                        f"{', dvl_calibration' if self.dvl_calibration else ''}{', yaw_bias' if self.yaw_bias else ''}. "
+                        f"Got {block!r} instead.")
+
+    def active_index(self, i: int) -> int:
+        """Position of global state index ``i`` in the active block (``xa``, ``Paa``); -1 when passive."""
+        return int(self._loc[i])
+
+    def landmark_positions(self) -> np.ndarray:
+        """(N, 3) current world positions of every landmark (exact for passive ones after the last flush)."""
+        offs = np.array([lm.offset for lm in self.landmarks], dtype=np.intp)
+        if len(offs) == 0:
+            return np.zeros((0, 3))
+        pos = self.x[offs[:, None] + np.arange(3)]
+        loc = self._loc[offs]
+        a = loc >= 0
+        pos[a] = self.xa[loc[a][:, None] + np.arange(3)]
+        return pos
+
     # ------------------------------------------------------------------ active set / compression
     @property
     def n(self) -> int:

@@ -37,12 +37,11 @@ def mission_clusters(mission, *, voxel_m: float = 0.005, min_points: int = 30) -
     from ..simulation.simulate import T_world_scanner_at
 
     objects = builtin_objects()
-    n_lines = int(mission.config["simulator"]["scanner"]["n_lines"])
     out = []
     for rec in mission.scans:
         cloud = mission.load_scan(rec.scan_id)
         inst = np.asarray(cloud.fields["instance"])
-        line = np.asarray(cloud.fields["line"])
+        stamps = mission.point_stamps_s(rec, cloud)
         for k in np.unique(inst[inst >= 0]):
             obj = mission.objects[int(k)]
             if obj.label not in objects:
@@ -51,7 +50,7 @@ def mission_clusters(mission, *, voxel_m: float = 0.005, min_points: int = 30) -
             pts = voxel_downsample(cloud.points_xyz_m[sel], voxel_m) if voxel_m > 0 else cloud.points_xyz_m[sel]
             if len(pts) < min_points:
                 continue
-            t = rec.start_stamp_s + float(np.median(line[sel])) * (rec.end_stamp_s - rec.start_stamp_s) / (n_lines - 1)
+            t = float(np.median(stamps[sel]))
             T_ws = T_world_scanner_at(mission.truth, mission.T_vehicle_scanner, t)
             T = (T_ws.inverse() @ obj.T_world_object).matrix
             out.append(EvalCluster(obj.label, pts, T, objects[obj.label].symmetry, rec.scan_id, mission.seed or 0))
@@ -130,8 +129,8 @@ class EvalRow:
 
 def evaluate(clusters, models: dict, *, seed: int = 0, **kwargs) -> list[EvalRow]:
     """Run :func:`estimate_object_pose` on every cluster with ``models[label]`` (PoseModel)."""
-    from . import pose
-    from .pose import estimate_object_pose
+    from ..registration import pose
+    from ..registration.pose import estimate_object_pose
 
     rows = []
     for i, c in enumerate(clusters):

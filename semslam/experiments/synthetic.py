@@ -15,7 +15,7 @@ import numpy as np
 
 from .._validation import as_rng
 from ..geometry import RigidTransform
-from ..simulation.mission import AhrsLog, DepthLog, DvlLog, Mission, ObjectTruth, VehicleTruth
+from ..dataset import AttitudeLog, Dataset, DepthLog, DvlLog, ObjectTruth, VehicleDescription, VehicleTruth
 
 LABELS = ("reducing_socket", "elbow", "reducing_tee", "ball_valve")
 
@@ -25,7 +25,7 @@ def square_mission(*, seed=0, loops: int = 3, side_m: float = 4.0, speed_mps: fl
                    depth_rate_hz: float = 10.0, dvl_sigma_mps: float = 0.005, ahrs_sigma_rpy_rad=(0.0035, 0.0035, 0.0175),
                    depth_sigma_m: float = 0.02, yaw_bias_rad: float = 0.0, dvl_dropout_prob: float = 0.0,
                    dvl_outlier_prob: float = 0.0, dvl_outlier_std_mps: float = 0.2, object_depth_m: float = 5.0,
-                   extra_objects: int = 0) -> Mission:
+                   extra_objects: int = 0) -> Dataset:
     """The mission described in the module docstring. Stamps start at 0 s."""
     rng = as_rng(seed, caller="square_mission")
     straight = side_m - 2 * corner_radius_m
@@ -75,9 +75,14 @@ def square_mission(*, seed=0, loops: int = 3, side_m: float = 4.0, speed_mps: fl
         objects.append(ObjectTruth(f"{label}_x{k}", label, RigidTransform.from_xyz_rpy(
             [c[0], c[1], object_depth_m], [0.0, 0.0, rng.uniform(-math.pi, math.pi)])))
     T_vs = RigidTransform.from_xyz_rpy([0.6, 0.0, 0.3], [0.0, 0.0, 0.0])
-    cfg = {"dvl": {"noise_abs_mps": dvl_sigma_mps, "noise_rel": 0.0},
-           "ahrs": {"noise_rpy_rad": list(ahrs_sigma_rpy_rad), "yaw_bias_rad": yaw_bias_rad},
-           "depth": {"noise_m": depth_sigma_m},
-           "scanner": {"max_range_m": 4.0, "min_range_m": 0.3, "sweep_fov_rad": math.radians(70.0), "scan_rate_hz": 2.0}}
-    return Mission(cfg, T_vs, DvlLog(td, vd, valid), AhrsLog(ta, ra), DepthLog(tz, z), truth, objects,
+    vehicle = VehicleDescription.from_dict({
+        "name": "synthetic-square",
+        "scanner": {"matrix": T_vs.matrix.tolist(), "max_range_m": 4.0, "min_range_m": 0.3,
+                    "fov_rad": math.radians(70.0), "rate_hz": 2.0},
+        "dvl": {"noise_abs_mps": dvl_sigma_mps, "noise_rel": 0.0, "scale_factor_sigma": 0.0,
+                "misalignment_sigma_rad": 0.0, "bias_sigma_mps": 0.0, "degraded_bias_sigma_mps": 0.0},
+        "attitude": {"noise_rpy_rad": list(ahrs_sigma_rpy_rad)},
+        "depth": {"noise_m": depth_sigma_m}})
+    meta = {"synthetic": {"ahrs_yaw_bias_rad": yaw_bias_rad}}
+    return Dataset(vehicle, DvlLog(td, vd, valid), AttitudeLog(ta, ra), DepthLog(tz, z), truth, objects, [], meta,
                    seed=seed if isinstance(seed, int) else None)

@@ -1,7 +1,7 @@
 """Seeded Monte-Carlo evaluation: N missions, each run in several modes; ATE and ANEES with chi-square bands.
 
 Missions come from the simulator (``semslam.simulation.simulate_mission(config, seed=..., with_scans=False)``)
-when it is available, else from :func:`semslam.slam.synthetic.square_mission`. Run ``i`` uses seed
+when it is available, else from :func:`semslam.experiments.synthetic.square_mission`. Run ``i`` uses seed
 ``seed + i`` for the mission and the truth-based detections, so every mode sees the same missions.
 """
 
@@ -18,8 +18,9 @@ import numpy as np
 from .._atomic import atomic_write_text
 from .._validation import check_int
 from ..errors import SlamError
-from .metrics import anees, chi2_band, nees
-from .runner import MODES, SlamConfig, run_slam
+from ..simulation.truth_slam import run_truth_slam
+from ..slam import MODES, SlamConfig
+from ..slam.metrics import anees, chi2_band, nees
 
 
 def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
@@ -28,20 +29,16 @@ def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", 
 
     ``white_dvl``: the simulator's DVL without its systematic errors (scale, misalignment, biases)."""
     if source in ("auto", "simulator"):
-        try:
-            from ..simulation import simulate_mission  # type: ignore[attr-defined]
-            from ..simulation.config import DvlConfig, SimulatorConfig
-        except ImportError:
-            if source == "simulator":
-                raise SlamError("semslam.simulation.simulate_mission is not available.") from None
-        else:
-            base = SimulatorConfig()
-            cfg = base.replace(ahrs=replace(base.ahrs, yaw_bias_rad=float(yaw_bias_rad),
-                                            yaw_bias_walk_rad_per_sqrt_s=float(yaw_bias_walk_rad_per_sqrt_s)),
-                               trajectory=replace(base.trajectory, loops=loops))
-            if white_dvl:
-                cfg = cfg.replace(dvl=DvlConfig.white())
-            return simulate_mission(cfg, seed=seed, with_scans=False)
+        from ..simulation import simulate_mission
+        from ..simulation.config import DvlConfig, SimulatorConfig
+
+        base = SimulatorConfig()
+        cfg = base.replace(ahrs=replace(base.ahrs, yaw_bias_rad=float(yaw_bias_rad),
+                                        yaw_bias_walk_rad_per_sqrt_s=float(yaw_bias_walk_rad_per_sqrt_s)),
+                           trajectory=replace(base.trajectory, loops=loops))
+        if white_dvl:
+            cfg = cfg.replace(dvl=DvlConfig.white())
+        return simulate_mission(cfg, seed=seed, with_scans=False)
     from .synthetic import square_mission
 
     return square_mission(seed=seed, yaw_bias_rad=yaw_bias_rad, loops=loops)
@@ -120,9 +117,9 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
         mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
                                yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
                                white_dvl=white_dvl)
-        cfg = SlamConfig.for_mission(mission, **(config_overrides or {}))
+        cfg = SlamConfig(**(config_overrides or {}))
         for mode in modes:
-            res = run_slam(mission, mode=mode, config=cfg, seed=seed + i)
+            res = run_truth_slam(mission, mode=mode, config=cfg, seed=seed + i)
             if res.truth_position_ned_m is None:
                 raise SlamError("Monte-Carlo runs need missions with ground truth.")
             e = res.position_ned_m - res.truth_position_ned_m
@@ -228,7 +225,7 @@ def _landmark_anees(per_run: list, dof: int) -> dict:
 
 def write_montecarlo(result: MonteCarloResult, out_dir: str | Path) -> Path:
     """``summary.json``, ``summary.md`` and per mode ``anees_<mode>.csv`` (epoch, ANEES, mean error, mean 3-sigma)."""
-    from ..cli._output import to_jsonable
+    from .._jsonable import to_jsonable
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DatabaseError
-from .database import (
+from ..recognition.database import (
     DEFAULT_NORMAL_RADIUS_M,
     DEFAULT_VOXEL_LEAF_M,
     FORMAT_VERSION,
@@ -57,7 +57,7 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
         ``esf_n_samples``, ``voxel_leaf_m``).
     """
     from .. import __version__
-    from ..simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT, builtin_view_clouds
+    from .kinect import POSE_MODEL_KINECT, SURVEY_KINECT, builtin_view_clouds
 
     params = {"format_version": FORMAT_VERSION, "semslam": __version__, "kinect": SURVEY_KINECT.to_dict(),
               "model_kinect": POSE_MODEL_KINECT.to_dict(), "n_model_views": int(n_model_views),

@@ -1,0 +1,27 @@
+"""semslam.dataset: the data contract of a dive, independent of where it came from.
+
+A :class:`Dataset` holds a :class:`VehicleDescription` (mounting and sensor figures, from a TOML file), the
+navigation logs (:class:`DvlLog`, :class:`AttitudeLog`, :class:`DepthLog`), the scans (:class:`ScanRecord`) and
+optional ground truth (:class:`VehicleTruth`, :class:`ObjectTruth`). A mission directory is one on-disk form
+(:func:`read_mission`, :func:`write_mission`); the simulator and the ROS-bag reader are producers of it.
+"""
+
+from .dataset import TIME_FIELDS, Dataset, Mission
+from .logs import AhrsLog, AttitudeLog, DepthLog, DvlLog, ObjectTruth, ScanRecord, VehicleTruth, check_stamps
+from .mission_dir import FORMAT_VERSION, read_mission, vehicle_from_simulator_dict, write_mission
+from .vehicle import (
+    AttitudeSpec,
+    DepthSpec,
+    DvlSpec,
+    ScannerSpec,
+    VehicleDescription,
+    read_vehicle_toml,
+    write_vehicle_toml,
+)
+
+__all__ = [
+    "TIME_FIELDS", "Dataset", "Mission", "AhrsLog", "AttitudeLog", "DepthLog", "DvlLog", "ObjectTruth", "ScanRecord",
+    "VehicleTruth", "check_stamps", "FORMAT_VERSION", "read_mission", "vehicle_from_simulator_dict", "write_mission",
+    "AttitudeSpec", "DepthSpec", "DvlSpec", "ScannerSpec", "VehicleDescription", "read_vehicle_toml",
+    "write_vehicle_toml",
+]

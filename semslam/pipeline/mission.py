@@ -1,0 +1,102 @@
+"""The one loop over a dataset's scans: every scan through a :class:`~semslam.pipeline.scan.ScanRecognizer`,
+each detection stamped with its own points' acquisition time, the detections kept for SLAM as
+``{scan_id: [Detection]}`` (the form :func:`semslam.slam.run_slam` and ``detections.jsonl`` take).
+
+Scoring against ground truth is a separate pass (``on_scan`` receives every scan's cloud and result).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..dataset import Dataset, ScanRecord
+from ..detection import Detection
+from ..errors import InputError
+from .scan import RecognitionResult, ScanRecognizer
+
+#: seed of scan ``k`` from the run's seed (every scan its own stream, independent of the others)
+SCAN_SEED_STRIDE = 100003
+
+
+def scan_seed(seed: int, scan_id: int) -> int:
+    return int(seed) * SCAN_SEED_STRIDE + int(scan_id)
+
+
+@dataclass
+class MissionDetections:
+    """Detections of a whole dataset and per-scan statistics (``scans``: one dict per scan with ``scan_id``,
+    ``stamp_s``, ``n_points``, ``n_clusters``, ``n_detections``, ``n_kept`` and the stage timings in ms)."""
+
+    detections_by_scan: dict[int, list[Detection]] = field(default_factory=dict)
+    scans: list[dict] = field(default_factory=list)
+
+    @property
+    def n_detections(self) -> int:
+        return sum(len(v) for v in self.detections_by_scan.values())
+
+    def summary(self) -> dict:
+        total = np.array([s["timings_ms"].get("total", np.nan) for s in self.scans]) if self.scans else np.zeros(0)
+        return {
+            "n_scans": len(self.scans),
+            "n_clusters": int(sum(s["n_clusters"] for s in self.scans)),
+            "n_detections": int(sum(s["n_detections"] for s in self.scans)),
+            "n_kept": self.n_detections,
+            "scan_latency_ms_median": float(np.median(total)) if total.size else float("nan"),
+            "scan_latency_ms_p90": float(np.percentile(total, 90)) if total.size else float("nan"),
+        }
+
+
+def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
+                   progress: bool = False,
+                   on_scan: Callable[[ScanRecord, object, RecognitionResult], None] | None = None) -> MissionDetections:
+    """Recognise the objects of every scan of ``dataset``.
+
+    Parameters
+    ----------
+    dataset : Dataset
+    recognizer : ScanRecognizer
+        Prepared once for the database (see :meth:`ScanRecognizer.warm_up`).
+    seed : int
+        Scan ``k`` is recognised with seed ``seed * 100003 + k``: the same seed gives the same detections.
+    keep_unreliable : bool
+        Keep detections whose pose is flagged unreliable (default: only reliable ones go to SLAM).
+    progress : bool
+        A progress bar (scans).
+    on_scan : callable, optional
+        ``on_scan(record, cloud, result)`` after each scan (e.g. scoring against ground truth, figures).
+    """
+    if not isinstance(dataset, Dataset):
+        raise InputError(f"The 'dataset' argument of detect_mission must be a Dataset. Got {type(dataset).__name__} instead.")
+    if not isinstance(recognizer, ScanRecognizer):
+        raise InputError(f"The 'recognizer' argument of detect_mission must be a ScanRecognizer. Got "
+                         f"{type(recognizer).__name__} instead.")
+    out = MissionDetections()
+    scans = dataset.scans
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(scans), desc="recognise", unit="scan", leave=False)
+    try:
+        for rec in scans:
+            cloud = dataset.load_scan(rec.scan_id)
+            stamps = dataset.point_stamps_s(rec, cloud)
+            result = recognizer.recognize(cloud, seed=scan_seed(seed, rec.scan_id), stamp_s=rec.end_stamp_s,
+                                          scan_id=rec.scan_id, point_stamps_s=stamps)
+            kept = [d for d in result.detections if d.reliable or keep_unreliable]
+            if kept:
+                out.detections_by_scan[rec.scan_id] = kept
+            out.scans.append({"scan_id": rec.scan_id, "stamp_s": rec.end_stamp_s, "n_points": cloud.n_points,
+                              "n_clusters": len(result.clusters), "n_detections": len(result.detections),
+                              "n_kept": len(kept), "timings_ms": dict(result.timings_ms)})
+            if on_scan is not None:
+                on_scan(rec, cloud, result)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return out

@@ -1,0 +1,330 @@
+"""A streaming SLAM session: feed attitude, DVL, depth and detections as they come, ask for the estimate at any
+time, finish to get the run's history, map and smoothed trajectory.
+
+Modes: ``dr`` (DVL + depth + AHRS dead reckoning; detections ignored), ``position`` (object positions only),
+``pose`` (the papers' cascade: full-pose test, else position test), ``pose+heading`` (``pose`` with an AHRS
+yaw-bias state; observability-constrained when no landmark is surveyed, since a constant bias is then
+unobservable).
+
+Time. Every message carries its own stamp (s, one clock). The attitude is the filter's input: a measurement at
+``t`` is processed once an attitude sample at or after ``t`` has arrived (the prediction interpolates the
+attitude at the midpoint of steps of at most ``max_predict_dt_s``), or at :meth:`SlamSession.finish` (the last
+attitude is then held). Pending messages are processed in stamp order (DVL, then depth, then detections at equal
+stamps), so messages of different sensors may arrive interleaved in any order within that delay; each sensor's
+own stamps must not decrease, and a message older than what the filter already processed raises
+:class:`~semslam.errors.SlamError` (it would otherwise be silently applied at the wrong time). Equal stamps are
+processed in arrival order. DVL and depth samples before the session's start stamp are ignored.
+
+History. The state is recorded every ``1 / history_rate_hz`` s from the start (the epochs of the result and of
+the RTS smoother).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float_array, check_choice
+from ..dataset import VehicleDescription
+from ..detection import Detection
+from ..errors import SlamError
+from ..geometry import RigidTransform, rotation_from_rpy
+from ..symmetry import Symmetry
+from .config import MODES, SlamConfig
+from .ekf import SemanticEkf
+from .mapping import ObjectMapper
+from .metrics import nis_summary
+from .results import LandmarkEstimate, SlamEstimate, SlamResult
+from .sensors import AttitudeInput, DepthModel, DvlModel, SensorGate
+from .smoother import RtsRecorder
+
+_ORDER = {"dvl": 1, "depth": 2, "detections": 3}
+
+
+class SlamSession:
+    """The semantic EKF-SLAM fed message by message (see the module docstring).
+
+    Parameters
+    ----------
+    vehicle : VehicleDescription
+        Mounting and sensor figures (the filter's noise model).
+    mode : {"dr", "position", "pose", "pose+heading"}
+    config : SlamConfig, optional
+    symmetries : dict, optional
+        Symmetry per class label (no symmetry for a class not listed).
+    start_stamp_s : float, optional
+        Start of the run (the first epoch). Default: the stamp of the first message.
+    initial_position_ned_m, initial_velocity_body_mps : array-like of shape (3,)
+        The launch point (it defines the world frame; known to ``config.initial_position_sigma_m``) and the
+        initial body velocity (known to ``config.initial_velocity_sigma_mps``).
+    """
+
+    def __init__(self, vehicle: VehicleDescription, *, mode: str = "pose", config: SlamConfig | None = None,
+                 symmetries: dict[str, Symmetry] | None = None, start_stamp_s: float | None = None,
+                 initial_position_ned_m: Any = (0.0, 0.0, 0.0), initial_velocity_body_mps: Any = (0.0, 0.0, 0.0)) -> None:
+        check_choice("mode", mode, MODES, caller="SlamSession")
+        if not isinstance(vehicle, VehicleDescription):
+            raise SlamError(f"The 'vehicle' argument of SlamSession must be a VehicleDescription. Got "
+                            f"{type(vehicle).__name__} instead.")
+        cfg = SlamConfig() if config is None else config
+        if not isinstance(cfg, SlamConfig):
+            raise SlamError(f"The 'config' argument of SlamSession must be a SlamConfig. Got {type(cfg).__name__} instead.")
+        self.vehicle, self.cfg, self.mode = vehicle, cfg, mode
+        self.symmetries = dict(symmetries or {})
+        self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
+        self._v0 = as_float_array("initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession",
+                                  error=SlamError)
+        if start_stamp_s is not None and not math.isfinite(float(start_stamp_s)):
+            raise SlamError(f"The 'start_stamp_s' argument of SlamSession must be finite. Got {start_stamp_s!r} instead.")
+        self._t0 = None if start_stamp_s is None else float(start_stamp_s)
+        self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.propagate_attitude_noise)
+        self.dvl = DvlModel(vehicle, cfg.dvl_use_beam_ranges)
+        self.depth = DepthModel(vehicle)
+        self.gate = SensorGate(cfg)
+        self.log: list[dict] = []
+        self.ekf: SemanticEkf | None = None
+        self._pending: list = []
+        self._seq = 0
+        self._last_stamp: dict[str, float] = {}
+        self._processed_s = -math.inf
+        self._t_end = -math.inf
+        self._surveyed: list = []
+        self._H: dict[str, list] = {k: [] for k in ("t", "p", "Pp", "v", "Pv", "b", "bv", "c")}
+        self._next_hist = 0
+        self._finished = False
+
+    # ------------------------------------------------------------------ set-up
+    def _start(self, stamp_s: float) -> None:
+        cfg, vehicle = self.cfg, self.vehicle
+        self._t0 = stamp_s if self._t0 is None else self._t0
+        d = vehicle.dvl
+        heading = self.mode == "pose+heading"
+        calib = cfg.dvl_calibration and any(v > 0 for v in (d.scale_factor_sigma, d.misalignment_sigma_rad,
+                                                               d.bias_sigma_mps, d.degraded_bias_sigma_mps))
+        var0 = [cfg.initial_position_sigma_m ** 2] * 3 + [cfg.initial_velocity_sigma_mps ** 2] * 3
+        if calib:
+            var0 += [max(d.bias_sigma_mps, 1e-6) ** 2] * 3 + [1e-12] * 3 + [max(d.scale_factor_sigma, 1e-6) ** 2,
+                                                                          max(d.misalignment_sigma_rad, 1e-6) ** 2]
+        if heading:
+            var0 += [cfg.yaw_bias_sigma_rad ** 2]
+        ekf = SemanticEkf(self._p0, self._v0, np.diag(var0), yaw_bias=heading, dvl_calibration=calib,
+                          dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
+                          dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps, dvl_slope_bias_tau_s=d.degraded_bias_tau_s)
+        ekf.constrain_heading_nullspace(heading and cfg.observability_constrained)
+        if cfg.smooth:
+            ekf.recorder = RtsRecorder(n_keep=6, max_bytes=cfg.smoother_max_mb * 1e6)
+        self.ekf = ekf
+        self.t = self._t0
+        self.mapper = ObjectMapper(ekf, cfg, self.mode, self.symmetries, vehicle.T_vehicle_scanner, self._log)
+        if self._surveyed:
+            names, labels, poses = zip(*self._surveyed)
+            self.mapper.add_surveyed(self._t0, names, labels, poses, cfg.survey_position_sigma_m,
+                                     cfg.survey_rotation_sigma_rad)
+
+    def add_surveyed_landmarks(self, names, labels, T_world_objects) -> None:
+        """Landmarks known a priori (a surveyed structure), to ``config.survey_position_sigma_m`` and
+        ``survey_rotation_sigma_rad``; before the first message only."""
+        if self.ekf is not None:
+            raise SlamError("SlamSession.add_surveyed_landmarks must be called before the first message.")
+        names, labels, poses = list(names), list(labels), list(T_world_objects)
+        if not (len(names) == len(labels) == len(poses)) or not all(isinstance(T, RigidTransform) for T in poses):
+            raise SlamError("SlamSession.add_surveyed_landmarks needs as many names, labels and RigidTransform poses.")
+        self._surveyed += list(zip(names, labels, poses))
+
+    # ------------------------------------------------------------------ messages
+    def _stamp(self, stream: str, stamp_s: Any) -> float:
+        try:
+            t = float(stamp_s)
+        except (TypeError, ValueError):
+            raise SlamError(f"The {stream} stamp must be a number of seconds. Got {stamp_s!r} instead.") from None
+        if not math.isfinite(t):
+            raise SlamError(f"The {stream} stamp must be finite. Got {stamp_s!r} instead.")
+        if self._finished:
+            raise SlamError("The session is finished: no more messages.")
+        last = self._last_stamp.get(stream, -math.inf)
+        if t < last:
+            raise SlamError(f"The {stream} stamps must not decrease. Got {t!r} after {last!r}.")
+        if t < self._processed_s:
+            raise SlamError(f"A {stream} message stamped {t!r} arrived after the filter had processed up to "
+                            f"{self._processed_s!r}: messages may not arrive later than the attitude that covers them.")
+        self._last_stamp[stream] = t
+        if self.ekf is None:
+            self._start(t)
+        return t
+
+    def _push(self, t: float, kind: str, payload) -> None:
+        heapq.heappush(self._pending, (t, _ORDER[kind], self._seq, kind, payload))
+        self._seq += 1
+        self._drain(final=False)
+
+    def add_attitude(self, stamp_s: float, rpy_rad: Any) -> None:
+        """AHRS roll, pitch, yaw (rad) of the vehicle in the world NED frame."""
+        t = self._stamp("attitude", stamp_s)
+        rpy = as_float_array("rpy_rad", rpy_rad, (3,), caller="SlamSession.add_attitude", error=SlamError)
+        self.attitude.add(t, rpy)
+        self._t_end = max(self._t_end, t)
+        self._drain(final=False)
+
+    def add_dvl(self, stamp_s: float, velocity_mps: Any, *, valid: bool = True, beam_range_m: Any = None) -> None:
+        """DVL velocity (m/s) in the DVL frame (NaN allowed when not ``valid``), optional per-beam slant ranges."""
+        t = self._stamp("dvl", stamp_s)
+        v = as_float_array("velocity_mps", velocity_mps, (3,), caller="SlamSession.add_dvl", error=SlamError,
+                           finite=bool(valid))
+        r = None if beam_range_m is None else as_float_array("beam_range_m", beam_range_m, (None,),
+                                                             caller="SlamSession.add_dvl", error=SlamError, finite=False)
+        self._t_end = max(self._t_end, t)
+        if t >= self._t0:
+            self._push(t, "dvl", (bool(valid), v, r))
+
+    def add_depth(self, stamp_s: float, depth_m: float) -> None:
+        """Pressure depth (m, positive down)."""
+        t = self._stamp("depth", stamp_s)
+        z = as_float_array("depth_m", [depth_m], (1,), caller="SlamSession.add_depth", error=SlamError)[0]
+        self._t_end = max(self._t_end, t)
+        if t >= self._t0:
+            self._push(t, "depth", z)
+
+    def add_detections(self, stamp_s: float, detections: list[Detection]) -> None:
+        """Detections made at ``stamp_s`` (poses in the scanner frame); ignored in ``dr`` mode."""
+        t = self._stamp("detections", stamp_s)
+        dets = list(detections)
+        if not all(isinstance(d, Detection) for d in dets):
+            raise SlamError("The 'detections' argument of SlamSession.add_detections must hold Detection objects.")
+        if self.mode != "dr" and dets:
+            self._push(t, "detections", dets)
+
+    # ------------------------------------------------------------------ processing
+    def _drain(self, final: bool) -> None:
+        covered = math.inf if final else self.attitude.last_stamp_s
+        while self._pending and self._pending[0][0] <= covered:
+            t, _, _, kind, payload = heapq.heappop(self._pending)
+            self._history_before(t)
+            self._predict_to(t)
+            if kind == "dvl":
+                self._update_dvl(t, *payload)
+            elif kind == "depth":
+                self._log(stamp_s=t, **self.depth.update(self.ekf, self.gate, payload))
+            else:
+                rpy, f = self.attitude.at(t)
+                self.mapper.process(t, payload, rotation_from_rpy(*rpy), self.attitude.cov_world(rpy, f))
+            self._processed_s = max(self._processed_s, t)
+            self.attitude.forget_before(self.t)
+
+    def _hist_stamp(self, k: int) -> float:
+        return self._t0 + k * (1.0 / self.cfg.history_rate_hz)
+
+    def _history_before(self, t: float, inclusive: bool = False) -> None:
+        """Record every history epoch before ``t`` (at or before with ``inclusive``)."""
+        while True:
+            h = self._hist_stamp(self._next_hist)
+            if h > t or (h == t and not inclusive):
+                return
+            self._predict_to(h)
+            self._record(h)
+            self._processed_s = max(self._processed_s, h)
+            self._next_hist += 1
+
+    def _predict_to(self, t: float) -> None:
+        cfg, ekf = self.cfg, self.ekf
+        degraded = bool(ekf.dvl_calibration and self.dvl.degraded)
+        while self.t < t - 1e-12:
+            dt = min(cfg.max_predict_dt_s, t - self.t)
+            rpy, f = self.attitude.at(self.t + dt / 2)
+            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.velocity_rw_mps_per_sqrt_s,
+                        attitude_cov_world=self.attitude.cov_world(rpy, f),
+                        yaw_bias_rw=self.vehicle.attitude.yaw_bias_walk_rad_per_sqrt_s, dvl_on_slope=degraded)
+            self.t += dt
+
+    def _update_dvl(self, t: float, valid: bool, v: np.ndarray, ranges) -> None:
+        flat = None
+        if ranges is not None:
+            flat = self.dvl.bottom_flat(ranges, rotation_from_rpy(*self.attitude.at(t)[0]))
+            if flat is not None:
+                self.dvl.degraded = not flat
+        if not valid:
+            self._log(stamp_s=t, kind="dvl_dropout", accepted=False)
+            return
+        self._log(stamp_s=t, **self.dvl.update(self.ekf, self.gate, self.dvl.body_velocity(v), flat))
+
+    def _record(self, t: float) -> None:
+        ekf, H = self.ekf, self._H
+        if ekf.recorder is not None:
+            ekf.recorder.mark(ekf)
+        H["t"].append(t)
+        H["p"].append(ekf.xa[0:3].copy())
+        H["Pp"].append(ekf.Paa[0:3, 0:3].copy())
+        H["v"].append(ekf.xa[3:6].copy())
+        H["Pv"].append(ekf.Paa[3:6, 3:6].copy())
+        H["b"].append(ekf.yaw_bias_rad())
+        H["bv"].append(float(ekf.Paa[ekf.i_yaw, ekf.i_yaw]) if ekf.yaw_bias else 0.0)
+        H["c"].append(ekf.dvl_calibration_state())
+
+    def _log(self, **kw) -> None:
+        self.log.append(kw)
+
+    # ------------------------------------------------------------------ outputs
+    def _landmarks(self) -> list[LandmarkEstimate]:
+        ekf = self.ekf
+        return [LandmarkEstimate(j, lm.label, ekf.landmark_pose(j), ekf.landmark_cov(j), lm.first_seen_s,
+                                 lm.last_seen_s, lm.n_updates, name=lm.name) for j, lm in enumerate(ekf.landmarks)]
+
+    def estimate(self) -> SlamEstimate:
+        """The current estimate (after every message the attitude covers)."""
+        if self.ekf is None:
+            raise SlamError("SlamSession.estimate needs at least one message.")
+        ekf = self.ekf
+        return SlamEstimate(self.t, ekf.xa[0:3].copy(), ekf.Paa[0:3, 0:3].copy(), ekf.xa[3:6].copy(),
+                            ekf.Paa[3:6, 3:6].copy(), ekf.yaw_bias_rad(), self._landmarks())
+
+    def finish(self) -> SlamResult:
+        """Process what is pending (holding the last attitude), record the remaining epochs up to the last
+        navigation stamp, smooth, and return the run's :class:`SlamResult` (no ground truth: see
+        :func:`semslam.slam.evaluation.evaluate_run`)."""
+        if self.ekf is None or not len(self.attitude):
+            raise SlamError("The session has no attitude sample: the filter needs the attitude as input.")
+        if self._finished:
+            raise SlamError("SlamSession.finish was already called.")
+        self._drain(final=True)
+        self._history_before(self._t_end + 1e-9)
+        self._finished = True
+        return self._result()
+
+    def _result(self) -> SlamResult:
+        ekf, H, log = self.ekf, self._H, self.log
+        ekf.flush()
+        stamps = np.asarray(H["t"])
+        landmarks = self._landmarks()
+        metrics: dict = {"mode": self.mode, "n_landmarks": len(landmarks),
+                         "duration_s": float(stamps[-1] - stamps[0]) if len(stamps) else 0.0}
+        nis: dict = {}
+        for r in log:
+            if r.get("accepted") and "nis" in r and np.isfinite(r["nis"]):
+                key = r["kind"] if r["kind"] != "landmark" else f"landmark_{r['test']}_{r['dof']}dof"
+                nis.setdefault(key, ([], r["dof"]))[0].append(r["nis"])
+        metrics["nis"] = nis_summary(nis)
+        ups = [r for r in log if r["kind"] == "landmark" and r.get("accepted")]
+        metrics["landmark_updates"] = {"pose": sum(r["test"] == "pose" for r in ups),
+                                       "position": sum(r["test"] == "position" for r in ups),
+                                       "rejected": sum(r["kind"] == "landmark" and not r.get("accepted") for r in log)}
+        metrics["cross_class_updates"] = sum(r["label"] != r["landmark_label"] for r in ups)
+        metrics["dvl_rejected"] = sum(r["kind"] == "dvl" and not r["accepted"] for r in log)
+        metrics["dvl_degraded"] = sum(r["kind"] == "dvl" and r.get("reason") == "degraded" for r in log)
+        metrics["dvl_maneuver_resets"] = sum(r["kind"] == "dvl" and r.get("reason") == "maneuver" for r in log)
+        metrics["dvl_dropouts"] = sum(r["kind"] == "dvl_dropout" for r in log)
+        sm = None
+        if ekf.recorder is not None:
+            sm = ekf.recorder.smooth(ekf)
+            metrics["smoother"] = {"status": ekf.recorder.status}
+            if sm is not None and len(sm.x) != len(stamps):  # pragma: no cover - guarded by construction
+                raise SlamError("internal error: smoothed epochs do not match the history")
+        return SlamResult(self.mode, stamps, np.asarray(H["p"]).reshape(-1, 3), np.asarray(H["Pp"]).reshape(-1, 3, 3),
+                          np.asarray(H["v"]).reshape(-1, 3), np.asarray(H["Pv"]).reshape(-1, 3, 3), np.asarray(H["b"]),
+                          None, landmarks, log, metrics, self.cfg,
+                          np.asarray(H["c"]).reshape(-1, 8) if ekf.dvl_calibration else None,
+                          np.asarray(H["bv"]) if ekf.yaw_bias else None,
+                          None if sm is None else sm.x[:, 0:3].copy(),
+                          None if sm is None else sm.P[:, 0:3, 0:3].copy(),
+                          None if sm is None else sm.x[:, 3:6].copy())

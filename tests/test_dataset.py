@@ -1,0 +1,288 @@
+"""The data contract (semslam.dataset), the streaming SLAM session and detect_mission, without and with the
+simulator: a dataset built from plain numpy arrays runs through both; a simulated mission gives the same run
+in memory, from its directory, and streamed in another interleaving."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from semslam.cloud import PointCloud
+from semslam.dataset import (
+    AttitudeLog,
+    Dataset,
+    DepthLog,
+    DvlLog,
+    ObjectTruth,
+    ScanRecord,
+    VehicleDescription,
+    VehicleTruth,
+    read_mission,
+    read_vehicle_toml,
+    write_mission,
+    write_vehicle_toml,
+)
+from semslam.errors import DatasetError, SemslamError, SlamError
+from semslam.geometry import RigidTransform
+from semslam.slam import SlamConfig, SlamSession, merged_messages, run_slam
+
+
+def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
+    """A straight, level run at 0.2 m/s north with a constant heading: plain arrays, no simulator."""
+    rng = np.random.default_rng(seed)
+    ta = np.arange(0.0, duration_s + 1e-9, 0.05)
+    td = np.arange(0.0, duration_s + 1e-9, 0.2)
+    tz = np.arange(0.0, duration_s + 1e-9, 0.1)
+    rpy = np.zeros((len(ta), 3)) + rng.normal(0, [0.0035, 0.0035, 0.0175], (len(ta), 3))
+    v = np.tile([0.2, 0.0, 0.0], (len(td), 1)) + rng.normal(0, 0.002, (len(td), 3))
+    z = 3.0 + rng.normal(0, 0.02, len(tz))
+    tt = np.arange(0.0, duration_s + 1e-9, 0.5)
+    truth = VehicleTruth(tt, np.column_stack([0.2 * tt, 0 * tt, 3.0 + 0 * tt]), np.zeros((len(tt), 3)),
+                         np.tile([0.2, 0.0, 0.0], (len(tt), 1)))
+    return Dataset(VehicleDescription.girona500(), DvlLog(td, v, np.ones(len(td), bool)), AttitudeLog(ta, rpy),
+                   DepthLog(tz, z), truth)
+
+
+def test_a_numpy_dataset_runs_through_slam_session_and_run_slam():
+    """run_slam is the loop over the session: the same numbers; dead reckoning tracks the straight run."""
+    ds = numpy_dive()
+    a = run_slam(ds, mode="dr", config=SlamConfig(perturb_initial_position=False))
+    s = SlamSession(ds.vehicle, mode="dr", config=SlamConfig(perturb_initial_position=False), start_stamp_s=0.0,
+                    initial_position_ned_m=[0.0, 0.0, 3.0], initial_velocity_body_mps=ds.dvl.velocity_body_mps[0])
+    for t, kind, payload in merged_messages(ds, {}):
+        if kind == "attitude":
+            s.add_attitude(t, *payload)
+        elif kind == "dvl":
+            s.add_dvl(t, payload[0], valid=payload[1])
+        else:
+            s.add_depth(t, *payload)
+    b = s.finish()
+    np.testing.assert_array_equal(a.position_ned_m, b.position_ned_m)
+    np.testing.assert_array_equal(a.position_cov_m2, b.position_cov_m2)
+    assert a.metrics["ate_rmse_m"] < 0.1
+    assert abs(a.position_ned_m[-1, 0] - 12.0) < 0.3 and a.stamps_s[-1] == pytest.approx(60.0)
+    est = s.estimate()
+    np.testing.assert_allclose(est.position_ned_m, b.position_ned_m[-1])
+
+
+def _stream(session: SlamSession, ds: Dataset, dets: dict, attitude_lead_s: float) -> None:
+    """Feed ``ds`` with the attitude ``attitude_lead_s`` ahead of the other sensors (another interleaving)."""
+    msgs = list(merged_messages(ds, dets))
+    key = [(t - (attitude_lead_s if kind == "attitude" else 0.0), i) for i, (t, kind, _) in enumerate(msgs)]
+    for _, i in sorted(key):
+        t, kind, payload = msgs[i]
+        if kind == "attitude":
+            session.add_attitude(t, *payload)
+        elif kind == "dvl":
+            session.add_dvl(t, payload[0], valid=payload[1], beam_range_m=payload[2])
+        elif kind == "depth":
+            session.add_depth(t, *payload)
+        else:
+            session.add_detections(t, *payload)
+
+
+@pytest.fixture(scope="module")
+def sim_mission():
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+
+    return simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=3, with_scans=False)
+
+
+def test_simulated_mission_same_run_in_memory_from_disk_and_streamed(sim_mission, tmp_path):
+    """The mission directory round-trips the run to 1e-9; streaming the messages with the attitude half a
+    second ahead of the other sensors gives the very same run (the session waits for the attitude)."""
+    from semslam.simulation.detections import simulate_detections
+    from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config
+
+    sym = builtin_symmetries()
+    dets = simulate_detections(sim_mission, truth_detection_config(sim_mission), seed=1, symmetries=sym)
+    cfg = SlamConfig(perturb_initial_position=False)
+    a = run_slam(sim_mission, dets, mode="pose", config=cfg, symmetries=sym)
+    back = read_mission(write_mission(sim_mission, tmp_path / "m"))
+    assert back.dvl.beam_range_m is not None and back.vehicle.to_dict() == sim_mission.vehicle.to_dict()
+    b = run_slam(back, dets, mode="pose", config=cfg, symmetries=sym)
+    np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-9)
+    np.testing.assert_allclose(b.smoothed_position_ned_m, a.smoothed_position_ned_m, atol=1e-9)
+    t0 = float(sim_mission.attitude.stamp_s[0])
+    v0 = sim_mission.dvl.velocity_body_mps[np.flatnonzero(sim_mission.dvl.valid)[0]]
+    s = SlamSession(sim_mission.vehicle, mode="pose", config=cfg, symmetries=sym, start_stamp_s=t0,
+                    initial_position_ned_m=sim_mission.truth.interpolate_position(t0)[0], initial_velocity_body_mps=v0)
+    _stream(s, sim_mission, dets, attitude_lead_s=0.5)
+    c = s.finish()
+    np.testing.assert_array_equal(c.position_ned_m, a.position_ned_m)
+    assert [lm.label for lm in c.landmarks] == [lm.label for lm in a.landmarks]
+    assert a.metrics["n_objects_mapped"] == 4 and a.metrics["ate_rmse_m"] < 0.1
+
+
+def test_beam_ranges_tell_the_filter_where_the_bottom_slopes(sim_mission):
+    """The simulated DVL's beams disagree with a flat bottom over the tank's slopes and agree over the flat
+    floor; the filter's degraded-noise hypothesis follows them (a planted tolerance of 10 m makes every bottom
+    flat, and the filter never takes the degraded hypothesis)."""
+    from semslam.geometry import rotations_from_rpy
+    from semslam.simulation.config import WorldConfig
+    from semslam.simulation.sensors import dvl_beams_over_slope
+    from semslam.slam.sensors import DvlModel
+
+    m = sim_mission
+    t = m.dvl.stamp_s
+    rpy = np.array([np.interp(t, m.truth.stamp_s, np.unwrap(m.truth.rpy_rad[:, i])) for i in range(3)]).T
+    slope = dvl_beams_over_slope(WorldConfig.from_dict(m.metadata["simulator"]["world"]),
+                                 m.truth.interpolate_position(t), rpy, math.radians(30.0))
+    model = DvlModel(m.vehicle)
+    R = rotations_from_rpy(rpy)
+    ok = np.isfinite(m.dvl.beam_range_m).all(axis=1)
+    flat = [model.bottom_flat(r, R[i]) for i, r in enumerate(m.dvl.beam_range_m)]
+    agree = np.mean([(not f) == s for f, s, k in zip(flat, slope, ok) if k])
+    assert agree > 0.97 and slope[ok].any() and (~slope[ok]).any()
+    assert all(f is None for f, k in zip(flat, ok) if not k)
+    run = run_slam(m, {}, mode="dr")
+    assert run.metrics["dvl_degraded"] > 0
+    lax = replace(m, vehicle=m.vehicle.replace(dvl=replace(m.vehicle.dvl, flat_bottom_tolerance_m=10.0)))
+    assert run_slam(lax, {}, mode="dr").metrics["dvl_degraded"] == 0
+
+
+def test_session_rejects_messages_in_the_past_and_bad_values():
+    ds = numpy_dive(duration_s=5.0)
+    s = SlamSession(ds.vehicle, mode="pose", start_stamp_s=0.0)
+    s.add_attitude(0.0, [0, 0, 0])
+    s.add_attitude(1.0, [0, 0, 0])
+    s.add_dvl(0.5, [0.2, 0, 0])  # covered by the attitude: processed now
+    with pytest.raises(SlamError, match="dvl stamps must not decrease"):
+        s.add_dvl(0.4, [0.2, 0, 0])
+    with pytest.raises(SlamError, match="depth message stamped 0.2 arrived after the filter had processed up to 0.5"):
+        s.add_depth(0.2, 3.0)
+    with pytest.raises(SlamError, match="finite"):
+        s.add_attitude(float("nan"), [0, 0, 0])
+    with pytest.raises(SlamError, match="'velocity_mps'.*finite"):
+        s.add_dvl(1.0, [np.nan, 0, 0])
+    s.add_dvl(1.0, [np.nan, 0, 0], valid=False)  # a dropout
+    with pytest.raises(SlamError, match="Detection"):
+        s.add_detections(1.0, ["not a detection"])
+    res = s.finish()
+    assert res.metrics["dvl_dropouts"] == 1
+    with pytest.raises(SlamError, match="finished"):
+        s.add_attitude(2.0, [0, 0, 0])
+    with pytest.raises(SlamError, match="attitude"):
+        SlamSession(ds.vehicle, mode="dr").finish()
+    with pytest.raises(SemslamError, match="'mode'"):
+        SlamSession(ds.vehicle, mode="fast")
+
+
+def test_logs_reject_nan_unsorted_and_bad_validity():
+    with pytest.raises(DatasetError, match=r"'stamp_s' argument of DvlLog must hold finite stamps.*row 1"):
+        DvlLog([0.0, np.nan], np.zeros((2, 3)), [1, 1])
+    with pytest.raises(DatasetError, match=r"AttitudeLog must be sorted.*0.5 after 1.0 at row 2"):
+        AttitudeLog([0.0, 1.0, 0.5], np.zeros((3, 3)))
+    with pytest.raises(DatasetError, match="'valid'.*0/1.*2"):
+        DvlLog([0.0, 1.0], np.zeros((2, 3)), [1, 2])
+    with pytest.raises(DatasetError, match="finite on every valid row"):
+        DvlLog([0.0], [[np.nan, 0, 0]], [True])
+    with pytest.raises(DatasetError, match="at least 2 rows"):
+        VehicleTruth([0.0], np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)))
+    with pytest.raises(DatasetError, match="beam ranges per row"):
+        Dataset(VehicleDescription(), DvlLog([0.0], np.zeros((1, 3)), [True], [[1.0, 1.0]]),
+                AttitudeLog([0.0], np.zeros((1, 3))), DepthLog([0.0], [1.0]))
+    empty = Dataset(VehicleDescription(), DvlLog([], np.zeros((0, 3)), []), AttitudeLog([], np.zeros((0, 3))),
+                    DepthLog([], []))
+    with pytest.raises(SlamError, match="no attitude samples"):
+        run_slam(empty, {}, mode="dr")
+
+
+def test_vehicle_file_round_trip_and_errors(tmp_path):
+    v = VehicleDescription.girona500().replace(
+        scanner=replace(VehicleDescription().scanner, line_count=100,
+                        T_vehicle_scanner=RigidTransform.from_xyz_rpy([0.6, 0, 0.3], [0, 0, math.pi / 2])))
+    path = write_vehicle_toml(v, tmp_path / "vehicle.toml")
+    assert read_vehicle_toml(path).to_dict() == v.to_dict()
+    cases = {
+        "typo": ("[dvl]\nnoise_abs_mp = 0.001\n", r"unknown key\(s\) \['dvl.noise_abs_mp'\]"),
+        "degrees": ("[dvl]\nbeam_angle_rad = 30\n", r"'dvl.beam_angle_rad' must be in \[0, 1.2\] rad \(degrees"),
+        "type": ("[depth]\nnoise_m = \"2 cm\"\n", r"'depth.noise_m' must be a number. Got '2 cm'"),
+        "rotation": ("[scanner]\nmatrix = [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n", "extrinsic scanner.T_vehicle_scanner"),
+        "both": ("[scanner]\nxyz_m = [0,0,0]\nmatrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n", "either"),
+        "toml": ("[dvl\n", "not valid TOML"),
+        "section": ("dvl = 3\n", "'dvl' must be a table"),
+        "version": ("format_version = 7\n", "'format_version' must be 1"),
+    }
+    for name, (text, msg) in cases.items():
+        f = tmp_path / f"{name}.toml"
+        f.write_text(text)
+        with pytest.raises(DatasetError, match=msg) as exc:
+            read_vehicle_toml(f)
+        assert str(f) in str(exc.value), name
+    with pytest.raises(DatasetError, match="does not exist"):
+        read_vehicle_toml(tmp_path / "none.toml")
+
+
+def test_mission_directory_v1_still_reads(sim_mission, tmp_path):
+    """A version-1 directory (simulator settings in mission.json, no vehicle.toml, no beam ranges) reads, and
+    its vehicle description is the simulator's sensor specification."""
+    d = write_mission(sim_mission, tmp_path / "v1")
+    meta = json.loads((d / "mission.json").read_text())
+    meta["format_version"] = 1
+    meta["T_vehicle_scanner"] = {"matrix": sim_mission.T_vehicle_scanner.matrix.tolist()}
+    (d / "mission.json").write_text(json.dumps(meta))
+    (d / "vehicle.toml").unlink()
+    rows = (d / "dvl.csv").read_text().splitlines()
+    (d / "dvl.csv").write_text("\n".join(",".join(r.split(",")[:5]) for r in rows) + "\n")
+    m = read_mission(d)
+    assert m.vehicle.to_dict() == sim_mission.vehicle.to_dict() and m.dvl.beam_range_m is None
+    np.testing.assert_array_equal(m.dvl.velocity_body_mps, sim_mission.dvl.velocity_body_mps)
+    meta["format_version"] = 2
+    (d / "mission.json").write_text(json.dumps(meta))
+    with pytest.raises(DatasetError, match="vehicle.toml"):
+        read_mission(d)
+
+
+def test_detect_mission_on_a_numpy_dataset_feeds_the_session():
+    """Scans held in memory (a synthetic box on a floor, no simulator) through detect_mission: the same
+    detections as the recogniser scan by scan, stamped inside each scan, and accepted by the session."""
+    from semslam.experiments.synthetic_views import partial_view, ring_viewpoints, synthetic_shape_views
+    from semslam.pipeline import PipelineConfig, ScanRecognizer, detect_mission, scan_seed
+    from semslam.recognition import build_database
+
+    views, classes = synthetic_shape_views(6, n_points=500, seed=2)
+    db = build_database(views, classes, seed=0)
+    rec = ScanRecognizer(db, PipelineConfig(estimate_pose=False), seed=0)
+    ds0 = numpy_dive(duration_s=6.0)
+    clouds, records = {}, []
+    rng = np.random.default_rng(5)
+    for k in range(3):
+        vp = ring_viewpoints(6, phase_rad=0.2)[k]  # views the database has not seen; the scanner at the origin
+        obj = partial_view("box", (0.10, 0.06, 0.03), vp, n_points=500, seed=k).points_xyz_m
+        floor = np.column_stack([rng.uniform(-0.4, 0.4, 4000), rng.uniform(-0.4, 0.4, 4000), np.full(4000, -0.02)])
+        pts = np.vstack([obj, floor]) - vp
+        line = np.repeat(np.arange(10), len(pts) // 10 + 1)[:len(pts)].astype(np.int32)
+        clouds[k] = PointCloud(pts, frame_id="scanner", fields={"line": line})
+        records.append(ScanRecord(k, 1.0 + k, 1.3 + k, f"scans/{k}.pcd", len(pts)))
+    vehicle = ds0.vehicle.replace(scanner=replace(ds0.vehicle.scanner, line_count=10))
+    ds = replace(ds0, vehicle=vehicle, scans=records, scan_clouds=clouds)
+    found = detect_mission(ds, rec, seed=4, keep_unreliable=True)  # no pose estimated: every pose unreliable
+    assert not detect_mission(ds, rec, seed=4).detections_by_scan
+    assert len(found.scans) == 3 and found.summary()["n_scans"] == 3
+    for r in records:
+        direct = rec.recognize(clouds[r.scan_id], seed=scan_seed(4, r.scan_id), stamp_s=r.end_stamp_s,
+                               scan_id=r.scan_id, point_stamps_s=ds.point_stamps_s(r, clouds[r.scan_id]))
+        assert [d.label for d in direct.detections] == [d.label for d in found.detections_by_scan.get(r.scan_id, [])]
+        for d in found.detections_by_scan.get(r.scan_id, []):
+            assert r.start_stamp_s <= d.stamp_s <= r.end_stamp_s
+    labels = [d.label for v in found.detections_by_scan.values() for d in v]
+    assert labels == ["box"] * 3
+    res = run_slam(ds, found.detections_by_scan, mode="position")
+    assert res.metrics["n_landmarks"] == 0  # detections without poses give no landmark, and break nothing
+
+
+def test_objects_and_scans_validate():
+    with pytest.raises(DatasetError, match="end_stamp_s"):
+        ScanRecord(0, 2.0, 1.0, "x.pcd")
+    ds = numpy_dive(duration_s=2.0)
+    with pytest.raises(DatasetError, match="unique scan ids"):
+        replace(ds, scans=[ScanRecord(0, 0.0, 0.1, "a"), ScanRecord(0, 0.2, 0.3, "b")])
+    with pytest.raises(DatasetError, match="scan ids"):
+        ds.load_scan(5)
+    obj = ObjectTruth("v", "ball_valve", RigidTransform.identity())
+    assert replace(ds, objects=[obj]).objects[0].in_database

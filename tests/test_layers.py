@@ -1,0 +1,119 @@
+"""The package's layering (README, "Architecture"), enforced: no module imports a layer above its own, nothing
+below ``simulation`` imports it, and the filter and the pipeline load without the simulator's mesh libraries.
+
+Layers, bottom to top (a module may import its own layer and those below):
+
+0. ``geometry``, ``cloud``, ``detection``, ``errors``, ``symmetry`` and the private helpers (``_validation``,
+   ``_atomic``, ``_pipeline_kernels``)
+1. ``io``, ``dataset``
+2. ``segmentation``, ``descriptors``
+3. ``recognition``, ``registration``
+4. ``pipeline`` (scan -> detections)
+5. ``slam`` (detections + navigation -> map)
+6. ``simulation`` (produces datasets)
+7. ``experiments``, ``report``, ``demo``
+8. ``cli``
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "semslam"
+
+LAYERS = {
+    "geometry": 0, "cloud": 0, "detection": 0, "errors": 0, "symmetry": 0, "_validation": 0, "_atomic": 0,
+    "_pipeline_kernels": 0, "_jsonable": 0, "__init__": 0,
+    "io": 1, "dataset": 1,
+    "segmentation": 2, "descriptors": 2,
+    "recognition": 3, "registration": 3,
+    "pipeline": 4,
+    "slam": 5,
+    "simulation": 6,
+    "experiments": 7, "report": 7, "demo": 7,
+    "cli": 8,
+}
+
+
+def _imported_tops(path: Path, root: Path) -> list[tuple[int, str]]:
+    """``(line, top-level semslam package)`` of every semslam import in ``path`` (absolute or relative)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    rel_parts = path.relative_to(root).parts
+    pkg_depth = len(rel_parts) - 1  # directories below semslam/
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                mod = node.module or ""
+                if mod == "semslam" or mod.startswith("semslam."):
+                    parts = mod.split(".")[1:]
+                    names = parts[:1] or [a.name for a in node.names]
+                    out += [(node.lineno, n) for n in names]
+                continue
+            up = node.level - 1  # how many packages above the module's own
+            base = list(rel_parts[:pkg_depth])[: max(pkg_depth - up, 0)] if up <= pkg_depth else None
+            if base is None:
+                continue
+            parts = base + ((node.module or "").split(".") if node.module else [])
+            if parts:
+                out.append((node.lineno, parts[0]))
+            else:  # "from .. import x" at the package root
+                out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("semslam."):
+                    out.append((node.lineno, a.name.split(".")[1]))
+    return out
+
+
+def layer_violations(root: Path = PKG) -> list[str]:
+    bad = []
+    for path in sorted(root.rglob("*.py")):
+        top = path.relative_to(root).parts[0].removesuffix(".py")
+        mine = LAYERS.get(top)
+        if mine is None:
+            bad.append(f"{path.relative_to(root.parent)}: package {top!r} has no layer (add it to LAYERS and the README)")
+            continue
+        for line, other in _imported_tops(path, root):
+            theirs = LAYERS.get(other, 0 if other in ("__version__",) else None)
+            if theirs is None:
+                continue
+            if theirs > mine or (other == "simulation" and mine < LAYERS["simulation"]):
+                bad.append(f"{path.relative_to(root.parent)}:{line} imports {other!r} (layer {theirs}) from layer {mine}")
+    return bad
+
+
+def test_no_module_imports_a_higher_layer():
+    """Catches an upward import such as ``semslam/slam/x.py: from ..simulation import ...``."""
+    assert layer_violations() == []
+
+
+def test_the_layer_test_fails_on_an_upward_import(tmp_path):
+    """A copy of the package with one planted upward import (slam -> simulation) must be reported."""
+    import shutil
+
+    copy = tmp_path / "semslam"
+    shutil.copytree(PKG, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    target = copy / "slam" / "config.py"
+    target.write_text(target.read_text(encoding="utf-8") + "\nfrom ..simulation import simulate_mission  # planted\n",
+                      encoding="utf-8")
+    bad = layer_violations(copy)
+    assert len(bad) == 1 and "slam/config.py" in bad[0] and "'simulation'" in bad[0]
+    target = copy / "dataset" / "logs.py"
+    target.write_text(target.read_text(encoding="utf-8") + "\nimport semslam.pipeline  # planted\n", encoding="utf-8")
+    assert len(layer_violations(copy)) == 2
+
+
+@pytest.mark.parametrize("module", ["semslam.slam", "semslam.pipeline", "semslam.dataset"])
+def test_library_layers_load_without_mesh_libraries(module):
+    """The filter and the pipeline must not pull in the simulator's mesh stack (trimesh, embree, manifold)."""
+    code = (f"import sys, {module}; bad = [m for m in ('trimesh', 'embreex', 'manifold3d', 'semslam.simulation') "
+            "if m in sys.modules]; print(','.join(bad))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ""
