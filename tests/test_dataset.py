@@ -286,3 +286,15 @@ def test_objects_and_scans_validate():
         ds.load_scan(5)
     obj = ObjectTruth("v", "ball_valve", RigidTransform.identity())
     assert replace(ds, objects=[obj]).objects[0].in_database
+
+
+def test_girona500_defaults_are_the_simulated_sensors_figures():
+    """The documented defaults for a dataset without a vehicle file are the sensor figures the Monte Carlo of
+    benchmarks/RESULTS.md validates (the simulator's specification): a change to either must be deliberate."""
+    from semslam.dataset import vehicle_from_simulator_dict
+    from semslam.simulation import SimulatorConfig
+
+    sim = vehicle_from_simulator_dict(SimulatorConfig().to_dict(), RigidTransform.identity()).to_dict()
+    default = VehicleDescription.girona500().to_dict()
+    for section in ("dvl", "attitude", "depth"):
+        assert sim[section] == default[section], section

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import SlamError
 from . import _ekf_kernels as kern
+from .compressed import CompressedState
 
 _EZ = np.array([0.0, 0.0, 1.0])
 
@@ -46,7 +47,7 @@ class LandmarkInfo:
     name: str = ""
 
 
-class SemanticEkf:
+class SemanticEkf(CompressedState):
     """Vehicle + landmark EKF. See the module docstring for the state and the compressed update.
 
     Parameters
@@ -130,9 +131,25 @@ class SemanticEkf:
                         f"{', dvl_calibration' if self.dvl_calibration else ''}{', yaw_bias' if self.yaw_bias else ''}. "
                         f"Got {block!r} instead.")
 
-    def active_index(self, i: int) -> int:
-        """Position of global state index ``i`` in the active block (``xa``, ``Paa``); -1 when passive."""
-        return int(self._loc[i])
+    @property
+    def position_ned_m(self) -> np.ndarray:
+        """Vehicle position (world NED, m): a view of the state (the vehicle is always active)."""
+        return self.xa[0:3]
+
+    @property
+    def position_cov_m2(self) -> np.ndarray:
+        return self.Paa[0:3, 0:3]
+
+    @property
+    def velocity_body_mps(self) -> np.ndarray:
+        return self.xa[3:6]
+
+    @property
+    def velocity_cov(self) -> np.ndarray:
+        return self.Paa[3:6, 3:6]
+
+    def yaw_bias_var_rad2(self) -> float:
+        return float(self.Paa[self.i_yaw, self.i_yaw]) if self.yaw_bias else 0.0
 
     def landmark_positions(self) -> np.ndarray:
         """(N, 3) current world positions of every landmark (exact for passive ones after the last flush)."""
@@ -145,49 +162,6 @@ class SemanticEkf:
         pos[a] = self.xa[loc[a][:, None] + np.arange(3)]
         return pos
 
-    # ------------------------------------------------------------------ active set / compression
-    @property
-    def n(self) -> int:
-        return len(self.x)
-
-    @property
-    def compressed(self) -> bool:
-        return len(self._B) > 0
-
-    def _set_active(self, A: np.ndarray) -> None:
-        A = np.asarray(A, dtype=np.intp)
-        self._A = A
-        mask = np.ones(self.n, dtype=bool)
-        mask[A] = False
-        self._B = np.flatnonzero(mask)
-        self._loc = np.full(self.n, -1, dtype=np.intp)
-        self._loc[A] = np.arange(len(A))
-        self.xa = self.x[A].copy()
-        self.Paa = np.ascontiguousarray(self.P[np.ix_(A, A)])
-        nA = len(A)
-        self._phi = np.eye(nA)
-        self._psi = np.zeros((nA, nA))
-        self._theta = np.zeros(nA)
-        self._dirty = False
-
-    def flush(self) -> None:
-        """Write the active block back and apply the deferred update to the passive part (``O(n^2)``)."""
-        A, B = self._A, self._B
-        if len(B) and self._dirty:
-            PAB0 = self.P[np.ix_(A, B)]
-            self.x[B] += PAB0.T @ self._theta
-            w, V = np.linalg.eigh(0.5 * (self._psi + self._psi.T))
-            keep = w > 0
-            W = np.zeros((self.n, int(keep.sum())))
-            W[B] = PAB0.T @ (V[:, keep] * np.sqrt(w[keep]))
-            kern.subtract_outer_inplace(self.P, W)
-            PAB = self._phi @ PAB0
-            self.P[np.ix_(A, B)] = PAB
-            self.P[np.ix_(B, A)] = PAB.T
-        self.P[np.ix_(A, A)] = self.Paa
-        self.x[A] = self.xa
-        self._set_active(A)
-
     def set_active_landmarks(self, landmark_ids) -> None:
         """Flush, then make the vehicle and ``landmark_ids`` the active set."""
         self.flush()
@@ -195,47 +169,7 @@ class SemanticEkf:
         self._set_active(np.concatenate(idx))
 
     def is_active(self, landmark_id: int) -> bool:
-        return self._loc[self.landmarks[landmark_id].offset] >= 0
-
-    # ------------------------------------------------------------------ views of the full state
-    def mean(self, idx) -> np.ndarray:
-        """Current mean of the global state indices ``idx``."""
-        idx = np.asarray(idx, dtype=np.intp)
-        loc = self._loc[idx]
-        out = np.empty(len(idx))
-        a = loc >= 0
-        if a.all():
-            return self.xa[loc]
-        out[a] = self.xa[loc[a]]
-        if (~a).any():
-            b = idx[~a]
-            out[~a] = self.x[b] + self.P[np.ix_(self._A, b)].T @ self._theta
-        return out
-
-    def cov(self, idx) -> np.ndarray:
-        """Current covariance block of the global state indices ``idx`` (exact, also for passive states)."""
-        idx = np.asarray(idx, dtype=np.intp)
-        loc = self._loc[idx]
-        if loc.min() >= 0:
-            return self.Paa[np.ix_(loc, loc)]
-        a = np.flatnonzero(loc >= 0)
-        b = np.flatnonzero(loc < 0)
-        C = np.empty((len(idx), len(idx)))
-        la = loc[a]
-        C[np.ix_(a, a)] = self.Paa[np.ix_(la, la)]
-        if len(b):
-            gb = idx[b]
-            PAb0 = self.P[np.ix_(self._A, gb)]
-            C[np.ix_(b, b)] = self.P[np.ix_(gb, gb)] - PAb0.T @ self._psi @ PAb0
-            Cab = self._phi[la] @ PAb0
-            C[np.ix_(a, b)] = Cab
-            C[np.ix_(b, a)] = Cab.T
-        return C
-
-    def full_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(x, P)`` of the whole state (flushes; ``O(n^2)``)."""
-        self.flush()
-        return self.x.copy(), self.P.copy()
+        return self.is_active_index(self.landmarks[landmark_id].offset)
 
     def vehicle_position(self) -> np.ndarray:
         return self.xa[0:3].copy()

@@ -79,7 +79,7 @@ class ObjectMapper:
             ids = range(len(ekf.landmarks))
         else:
             ekf.flush()
-            d = np.linalg.norm(ekf.landmark_positions() - ekf.xa[0:3], axis=1)
+            d = np.linalg.norm(ekf.landmark_positions() - ekf.position_ned_m, axis=1)
             ids = set(np.flatnonzero(d < cfg.active_radius_m).tolist()) | {j}
         ekf.set_active_landmarks(ids)
 
@@ -91,7 +91,7 @@ class ObjectMapper:
                 for k, d in enumerate(dets)]
         labels = [lm.label for lm in ekf.landmarks]
         lpos = ekf.landmark_positions()
-        p = ekf.xa[0:3]
+        p = ekf.position_ned_m
         unassociated = []
         for label in sorted({x.label for x in meas}):
             M = [x for x in meas if x.label == label]
@@ -147,10 +147,10 @@ class ObjectMapper:
     def _to_consensus(self, t, x, R_ahrs, att_cov, det) -> None:
         ekf = self.ekf
         R = ekf.true_attitude(R_ahrs)
-        p = ekf.xa[0:3].copy()
+        p = ekf.position_ned_m.copy()
         axes_w = x.unobservable_axes_vehicle @ R.T
         obs = Observation(x.label, t, p + R @ x.p_vehicle_object_m, R @ x.R_vehicle_object, x.symmetry, axes_w,
-                          payload=(R, p, x, att_cov, det.extras.get("object_name", ""), ekf.Paa[0:3, 0:3].copy()))
+                          payload=(R, p, x, att_cov, det.extras.get("object_name", ""), ekf.position_cov_m2.copy()))
         res = self.consensus.add(obs)
         self._log(stamp_s=t, kind="candidate", label=x.label, detection=x.index, accepted=res is not None,
                   object_name=det.extras.get("object_name", ""))
@@ -179,7 +179,7 @@ class ObjectMapper:
         # the members' world positions carry the vehicle's error at *their* stamps, the new landmark is tied to
         # the vehicle *now*: add the covariance of the mean displacement error since then (else the landmark looks
         # n-fold more precise relative to the vehicle than it is, and the next detections fail the gate)
-        Cp += drift_since(ekf.Paa[0:3, 0:3], [o.payload[5] for o in sorted(members, key=lambda o: o.stamp_s)])
+        Cp += drift_since(ekf.position_cov_m2, [o.payload[5] for o in sorted(members, key=lambda o: o.stamp_s)])
         for u in members[0].axes_world:  # free rotation about an unobservable axis: wide prior, never updated
             Cr += np.outer(u, u) * np.pi ** 2
         Einv = kern.world_rate_to_rpy(rpy)
@@ -189,7 +189,7 @@ class ObjectMapper:
         G = np.zeros((6, ekf.n_v))
         G[0:3, 0:3] = np.eye(3)
         if ekf.yaw_bias:
-            G[0:3, ekf.i_yaw] = -kern.skew(_EZ) @ (pos - ekf.xa[0:3])
+            G[0:3, ekf.i_yaw] = -kern.skew(_EZ) @ (pos - ekf.position_ned_m)
             G[5, ekf.i_yaw] = -1.0
         names = [o.payload[4] for o in members]
         name = max(set(names), key=names.count) if names else ""

@@ -111,9 +111,8 @@ class DepthModel:
 
     def update(self, ekf: SemanticEkf, gate: SensorGate, depth_m: float) -> dict:
         i = int(ekf.indices("position")[2])
-        loc = ekf.active_index(i)
-        nu = np.array([depth_m - ekf.xa[loc]])
-        s = ekf.Paa[loc, loc] + self.var
+        nu = np.array([depth_m - ekf.position_ned_m[2]])
+        s = ekf.position_cov_m2[2, 2] + self.var
         d2 = float(nu[0] * nu[0] / s) if s > 0 else float("inf")
         thr = gate.threshold[1]
         ok = d2 <= thr

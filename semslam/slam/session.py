@@ -254,12 +254,12 @@ class SlamSession:
         if ekf.recorder is not None:
             ekf.recorder.mark(ekf)
         H["t"].append(t)
-        H["p"].append(ekf.xa[0:3].copy())
-        H["Pp"].append(ekf.Paa[0:3, 0:3].copy())
-        H["v"].append(ekf.xa[3:6].copy())
-        H["Pv"].append(ekf.Paa[3:6, 3:6].copy())
+        H["p"].append(ekf.position_ned_m.copy())
+        H["Pp"].append(ekf.position_cov_m2.copy())
+        H["v"].append(ekf.velocity_body_mps.copy())
+        H["Pv"].append(ekf.velocity_cov.copy())
         H["b"].append(ekf.yaw_bias_rad())
-        H["bv"].append(float(ekf.Paa[ekf.i_yaw, ekf.i_yaw]) if ekf.yaw_bias else 0.0)
+        H["bv"].append(ekf.yaw_bias_var_rad2())
         H["c"].append(ekf.dvl_calibration_state())
 
     def _log(self, **kw) -> None:
@@ -276,8 +276,8 @@ class SlamSession:
         if self.ekf is None:
             raise SlamError("SlamSession.estimate needs at least one message.")
         ekf = self.ekf
-        return SlamEstimate(self.t, ekf.xa[0:3].copy(), ekf.Paa[0:3, 0:3].copy(), ekf.xa[3:6].copy(),
-                            ekf.Paa[3:6, 3:6].copy(), ekf.yaw_bias_rad(), self._landmarks())
+        return SlamEstimate(self.t, ekf.position_ned_m.copy(), ekf.position_cov_m2.copy(), ekf.velocity_body_mps.copy(),
+                            ekf.velocity_cov.copy(), ekf.yaw_bias_rad(), self._landmarks())
 
     def finish(self) -> SlamResult:
         """Process what is pending (holding the last attitude), record the remaining epochs up to the last

@@ -168,7 +168,7 @@ def _snapshot(ekf) -> tuple[np.ndarray, np.ndarray]:
     read, so that recording leaves the filter's arrays untouched."""
     if ekf.compressed:
         return ekf.full_state()
-    A = ekf._A
+    A = ekf.active_indices
     x = np.empty(ekf.n)
     x[A] = ekf.xa
     P = np.empty((ekf.n, ekf.n))
