@@ -10,7 +10,7 @@ ratio PCL best / our best (> 1: we are faster). ESF uses our default numpy sampl
 
 ``--describe-ab``: the pipeline's describe step (voxel grid, ESF, normals, VFH) on the clusters of 20 simulated
 scans that pass the size test, serial against normals + VFH on a helper thread
-(``semslam.recognition.database.CONCURRENT_DESCRIPTORS``), interleaved in one process (REPS rounds, the order
+(``ViewDatabase.describe(..., concurrent=)``), interleaved in one process (REPS rounds, the order
 alternating), medians per cluster.
 """
 
@@ -112,7 +112,6 @@ def main() -> None:
 def describe_ab(reps: int) -> None:
     from semslam.pipeline import ScanRecognizer
     from semslam.recognition import build_database
-    from semslam.recognition import database as D
     from semslam.recognition.plausibility import cluster_extent_m
     from semslam.segmentation.scene import segment_scene
     from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
@@ -127,18 +126,14 @@ def describe_ab(reps: int) -> None:
     limit = rec._max_plausible_extent_m()
     clusters = [c for c in clusters if cluster_extent_m(c.points_xyz_m)[0] <= limit]
     times: dict[bool, list[float]] = {False: [], True: []}
-    saved = D.CONCURRENT_DESCRIPTORS
     for flag in (False, True):  # warm both paths
-        D.CONCURRENT_DESCRIPTORS = flag
-        db.describe(clusters[0], seed=0)
+        db.describe(clusters[0], seed=0, concurrent=flag)
     for r in range(max(reps, 1)):
         for flag in ((False, True) if r % 2 == 0 else (True, False)):
-            D.CONCURRENT_DESCRIPTORS = flag
             for k, c in enumerate(clusters):
                 t = time.perf_counter()
-                db.describe(c, seed=k)
+                db.describe(c, seed=k, concurrent=flag)
                 times[flag].append((time.perf_counter() - t) * 1e3)
-    D.CONCURRENT_DESCRIPTORS = saved
     print(f"| describe, {len(clusters)} clusters x {reps} | serial median ms | concurrent median ms | serial / concurrent |")
     print("|---|---|---|---|")
     a, b = float(np.median(times[False])), float(np.median(times[True]))

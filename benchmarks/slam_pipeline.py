@@ -18,9 +18,8 @@ from semslam.pipeline import ScanRecognizer, detect_mission
 from semslam.simulation.builtin_db import builtin_database
 from semslam.simulation import simulate_mission
 from semslam.simulation.truth_slam import builtin_symmetries
-from semslam.slam import run_slam
+from semslam.slam import MODES, run_slam
 
-MODES = ("dr", "position", "pose", "pose+heading")
 
 
 def main() -> None:

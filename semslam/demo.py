@@ -34,8 +34,7 @@ from ._atomic import atomic_write_text
 from ._jsonable import to_jsonable
 from .errors import InputError
 from .experiments.recognition_scoring import recognition_summary, score_scan
-
-MODES = ("dr", "position", "pose", "pose+heading")
+from .slam.config import MODES
 
 
 def mode_dirname(mode: str) -> str:

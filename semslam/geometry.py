@@ -137,6 +137,16 @@ def check_rotation(name: str, R: Any, *, caller: str = "") -> np.ndarray:
     return R
 
 
+def orthonormalize_transform(T: np.ndarray) -> np.ndarray:
+    """``T`` (4x4, modified in place and returned) with its rotation block replaced by the nearest rotation
+    (SVD, determinant +1) and its last row ``[0, 0, 0, 1]``: the one re-orthonormalisation of every
+    iterative estimate (ICP, the coarse search) and of composed transforms."""
+    U, _, Vt = np.linalg.svd(T[:3, :3])
+    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    T[3] = [0.0, 0.0, 0.0, 1.0]
+    return T
+
+
 @dataclass(frozen=True, eq=False)
 class RigidTransform:
     """A rigid transform ``T_parent_child`` (4x4): maps child-frame points into the parent frame.
@@ -213,11 +223,8 @@ class RigidTransform:
     def __matmul__(self, other: "RigidTransform") -> "RigidTransform":
         if not isinstance(other, RigidTransform):
             return NotImplemented
-        T = self.matrix @ other.matrix
         # re-orthonormalise so that long chains never drift out of tolerance
-        U, _, Vt = np.linalg.svd(T[:3, :3])
-        T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-        return RigidTransform(T)
+        return RigidTransform(orthonormalize_transform(self.matrix @ other.matrix))
 
     def apply(self, points_xyz_m: Any) -> np.ndarray:
         """Map ``(N, 3)`` child-frame points into the parent frame."""

@@ -340,24 +340,23 @@ def test_build_rejects_bad_model_views(standin):
         build_database(views, classes, model_views=[("box", "m")])
 
 
-def test_concurrent_descriptors_equal_serial_ones(monkeypatch):
-    """Normals + VFH on the helper thread (CONCURRENT_DESCRIPTORS, the default) give exactly the serial results,
+def test_concurrent_descriptors_equal_serial_ones():
+    """Normals + VFH on the helper thread (concurrent=True, the default) give exactly the serial results,
     and ESF's errors still come first."""
     from semslam.descriptors import compute_esf, compute_vfh, estimate_normals
     from semslam.errors import DescriptorError
     from semslam.recognition import compute_view_descriptors
-    from semslam.recognition import database as database_module
     from semslam.segmentation.voxel import voxel_downsample
 
     views, _ = synthetic_shape_views(1, n_points=300, seed=7)
     clouds = [v[2] for v in views[:2]]
 
-    def run():
-        return [compute_view_descriptors(c, normal_radius_m=0.015, esf_n_samples=1000, voxel_leaf_m=0.005, seed=i)
+    def run(concurrent):
+        return [compute_view_descriptors(c, normal_radius_m=0.015, esf_n_samples=1000, voxel_leaf_m=0.005, seed=i,
+                                         concurrent=concurrent)
                 for i, c in enumerate(clouds)]
 
-    monkeypatch.setattr(database_module, "CONCURRENT_DESCRIPTORS", False)
-    serial = run()
+    serial = run(False)
     # the serial path is the plain composition of the public descriptor functions
     pts = voxel_downsample(clouds[0].points_xyz_m, 0.005)
     np.testing.assert_array_equal(serial[0].esf, compute_esf(pts, n_samples=1000, seed=0))
@@ -365,9 +364,8 @@ def test_concurrent_descriptors_equal_serial_ones(monkeypatch):
     ok = np.isfinite(nrm).all(axis=1)
     np.testing.assert_array_equal(serial[0].vfh, compute_vfh(pts[ok], nrm[ok], viewpoint_xyz_m=clouds[0].viewpoint_xyz_m)
                                   .astype(np.float32))
-    monkeypatch.setattr(database_module, "CONCURRENT_DESCRIPTORS", True)
     for _ in range(2):
-        for a, b in zip(run(), serial):
+        for a, b in zip(run(True), serial):
             np.testing.assert_array_equal(a.esf, b.esf)
             np.testing.assert_array_equal(a.vfh, b.vfh)
     line = PointCloud(np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)])  # both fail: ESF's error wins

@@ -59,3 +59,20 @@ def test_recognize_errors(scene, tmp_path, capsys):
     assert "missing.npz" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["recognize", str(scene), "--db", "builtin", "--descriptor", "fpfh"])
+
+
+def test_recognize_config_file_is_read_and_checked(scene, cache, tmp_path, capsys):
+    """--config (TOML) sets the pipeline (here: no pose, a coarser cluster tolerance); a typo or a wrong type
+    is a one-line error naming the file and the key."""
+    cfg = tmp_path / "pipe.toml"
+    cfg.write_text('[pipeline]\nestimate_pose = false\n[pipeline.segmentation]\ncluster_tolerance_m = 0.03\n')
+    assert main(["recognize", str(scene), "--db", "builtin", "--config", str(cfg), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["detections"] and all(d["covariance_6x6"] is None or not d["reliable"] for d in payload["detections"])
+    for text, words in (('[pipeline]\nestimate_poses = false\n', "estimate_poses"),
+                        ('[pipeline.segmentation]\ncluster_tolerance = 0.03\n', "cluster_tolerance"),
+                        ('[pipeline\n', "TOML")):
+        cfg.write_text(text)
+        assert main(["recognize", str(scene), "--db", "builtin", "--config", str(cfg)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0] and str(cfg) in err[0], err

@@ -24,10 +24,12 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                              "~/.cache/semslam)")
     parser.add_argument("--descriptor", choices=("esf", "vfh", "esf+vfh"), default=None,
                         help="global descriptor (default: the pipeline's, esf+vfh)")
-    parser.add_argument("--classifier", choices=("chi2", "svm"), default="chi2", help="default chi2")
+    parser.add_argument("--classifier", choices=("chi2", "svm"), default=None, help="default chi2")
     parser.add_argument("--seed", type=int, default=0, help="seed of RMSAC, ESF and the coarse alignment (default 0)")
     parser.add_argument("--no-pose", action="store_true", help="recognition only, no pose estimation")
     parser.add_argument("--out", metavar="FILE.jsonl", help="write one detection per line (JSON)")
+    parser.add_argument("--config", help="TOML or JSON file of PipelineConfig fields (a [pipeline] table, or the "
+                                         "fields at the top); --descriptor/--classifier/--no-pose override it")
     parser.set_defaults(func=run)
 
 
@@ -91,10 +93,19 @@ def run(args: argparse.Namespace) -> int:
     db = builtin_database(seed=0) if args.db == "builtin" else load_database(args.db)
     t_db = (time.perf_counter() - t0) * 1e3
     scan = read_point_cloud(args.scene)
-    kwargs = {"classifier": args.classifier, "estimate_pose": not args.no_pose}
+    raw = {}
+    if args.config:
+        from ._inputs import read_config_file
+
+        raw = read_config_file(args.config)
+        raw = dict(raw.get("pipeline", raw))
+    if args.classifier is not None:
+        raw["classifier"] = args.classifier
+    if args.no_pose:
+        raw["estimate_pose"] = False
     if args.descriptor is not None:
-        kwargs["descriptor"] = args.descriptor
-    config = PipelineConfig(**kwargs)
+        raw["descriptor"] = args.descriptor
+    config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "the options")
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)
     timings = {"load_db": t_db, **result.timings_ms}
     payload = {"scene": str(args.scene), "db": str(args.db), "n_points": scan.n_points,

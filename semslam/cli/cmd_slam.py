@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-MODE_CHOICES = ("dr", "position", "pose", "pose+heading", "all")
+from ..slam.config import MODES
+
+MODE_CHOICES = (*MODES, "all")
 
 
 def register(subparsers, common) -> None:

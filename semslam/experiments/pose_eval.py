@@ -129,7 +129,6 @@ class EvalRow:
 
 def evaluate(clusters, models: dict, *, seed: int = 0, **kwargs) -> list[EvalRow]:
     """Run :func:`estimate_object_pose` on every cluster with ``models[label]`` (PoseModel)."""
-    from ..registration import pose
     from ..registration.pose import estimate_object_pose
 
     rows = []
@@ -138,10 +137,9 @@ def evaluate(clusters, models: dict, *, seed: int = 0, **kwargs) -> list[EvalRow
         est = estimate_object_pose(c.points_scanner, models[c.label], symmetry=c.symmetry, seed=seed + i, **kwargs)
         ms = 1e3 * (time.process_time() - t0)  # CPU time of this process (the machine may be shared)
         r, t, n = pose_errors(est, c.T_scanner_object, c.symmetry)
-        terms = pose._COVARIANCE_TERMS.pop() if pose._STORE_COVARIANCE_TERMS and pose._COVARIANCE_TERMS else None
         rows.append(EvalRow(c.label, r, t, n, est.reliable, ms, len(c.points_scanner),
                             {**est.extras, "fitness": est.fitness, "rmse_m": est.rmse_m, "visibility": est.visibility,
-                             "score_margin": est.score_margin, "cov_terms": terms,
+                             "score_margin": est.score_margin,
                              "error": error_vector(est, c.T_scanner_object, c.symmetry)}))
     return rows
 

@@ -238,7 +238,8 @@ class ViewDatabase:
         return combine_descriptors(descriptor, self.esf, self.vfh)
 
     # -- queries --------------------------------------------------------------------------------
-    def describe(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> ViewDescriptors:
+    def describe(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0,
+                 concurrent: bool = True) -> ViewDescriptors:
         """Descriptors of a query cloud computed exactly as the stored views' (same parameters).
 
         The database's voxel grid (``params["voxel_leaf_m"]``, if any) is applied to the query first, so
@@ -246,9 +247,10 @@ class ViewDatabase:
         :func:`~semslam.segmentation.segment_scene` outputs it, changes little).
         """
         return compute_view_descriptors(
-            cloud, vfh_variant=self.params.get("vfh_variant"), normal_radius_m=self.params.get("normal_radius_m", 0.01),
+            cloud, vfh_variant=self.params.get("vfh_variant"),
+            normal_radius_m=self.params.get("normal_radius_m", DEFAULT_NORMAL_RADIUS_M),
             esf_n_samples=self.params.get("esf_n_samples", 20000), voxel_leaf_m=self.params.get("voxel_leaf_m"),
-            seed=seed)
+            seed=seed, concurrent=concurrent)
 
     def subset(self, indices: Any) -> ViewDatabase:
         """A database with the given views only (order kept); classes without views are dropped."""
@@ -322,10 +324,16 @@ def _vfh_default_variant() -> str:
     return str(p.default) if p is not None and p.default is not inspect.Parameter.empty else "default"
 
 
-def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = None, normal_radius_m: float = 0.01,
+def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = None,
+                             normal_radius_m: float = DEFAULT_NORMAL_RADIUS_M,
                              esf_n_samples: int = 20000, voxel_leaf_m: float | None = None,
-                             seed: int | np.random.Generator = 0) -> ViewDescriptors:
+                             seed: int | np.random.Generator = 0, concurrent: bool = True) -> ViewDescriptors:
     """ESF and VFH of one view, as stored in the database.
+
+    ``concurrent``: normals + VFH on a helper thread while this one computes ESF (~5 % less per cluster on a
+    lightly loaded 2-core machine, ``benchmarks/descriptors.py --describe-ab``: 1.01-1.08x in 6 of 6 runs; neutral
+    on a saturated one). The results are identical either way. Only ESF's kernel is parallel, so the helper never
+    launches a parallel region (safe with any numba threading layer).
 
     With ``voxel_leaf_m`` the cloud is first reduced to its voxel-grid centroids (PCL ``VoxelGrid``), so
     that dense views (a Kinect at 0.7 m, ~1.3 mm spacing) and sparse queries (laser-scan clusters after
@@ -369,7 +377,7 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
         ok = np.isfinite(normals).all(axis=1)
         return descriptors.compute_vfh(pts[ok], normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m, **kwargs)
 
-    if not CONCURRENT_DESCRIPTORS:
+    if not concurrent:
         esf = descriptors.compute_esf(pts, n_samples=int(esf_n_samples), seed=seed)
         vfh = normals_and_vfh()
     else:
@@ -390,11 +398,6 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
     return ViewDescriptors(esf, vfh)
 
 
-#: Compute normals + VFH on a helper thread, concurrently with ESF (see :func:`compute_view_descriptors`): ~5 %
-#: less per cluster on a lightly loaded 2-core machine (``benchmarks/descriptors.py --describe-ab``: 1.01-1.08x
-#: in 6 of 6 runs), neutral on a saturated one. Results are identical either way. Only ESF's kernel is parallel,
-#: so the helper never launches a parallel region (safe with any numba threading layer).
-CONCURRENT_DESCRIPTORS = True
 _HELPER: tuple[int, ThreadPoolExecutor] | None = None
 
 

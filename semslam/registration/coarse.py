@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from .._validation import as_float_array, as_rng, check_choice, check_int, check_positive
 from ..errors import InputError, RegistrationError
-from ..geometry import RigidTransform
+from ..geometry import RigidTransform, orthonormalize_transform
 from . import _coarse_kernels as K
 from .result import RegistrationResult, inlier_statistics
 
@@ -221,7 +221,4 @@ def _initial_guess(init_T: Any, src: np.ndarray, tgt: np.ndarray) -> np.ndarray 
 
 
 def _orthonormalise(T: np.ndarray) -> np.ndarray:
-    T = np.array(T, dtype=np.float64)
-    U, _, Vt = np.linalg.svd(T[:3, :3])
-    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    return T
+    return orthonormalize_transform(np.array(T, dtype=np.float64))

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from .._validation import as_float_array, check_choice, check_int, check_positive
 from ..errors import RegistrationError
-from ..geometry import RigidTransform
+from ..geometry import RigidTransform, orthonormalize_transform
 from ._icp_kernels import icp_pcl
 from .result import RegistrationResult, inlier_statistics
 
@@ -150,9 +150,7 @@ def align_icp(
 
 def _result(src, target, T, n_iterations, converged, max_corr, t0, t1, extras) -> RegistrationResult:
     t2 = time.perf_counter()
-    U, _, Vt = np.linalg.svd(T[:3, :3])
-    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    T[3] = [0.0, 0.0, 0.0, 1.0]
+    orthonormalize_transform(T)
     fitness, rmse, n_in = inlier_statistics(src @ T[:3, :3].T + T[:3, 3], target.tree, max_corr)
     return RegistrationResult(
         T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse,

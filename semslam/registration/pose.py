@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from .._validation import as_float_array, check_choice, check_int, check_positive
 from ..cloud import PointCloud
 from ..errors import InputError, RegistrationError
-from ..geometry import RigidTransform
+from ..geometry import RigidTransform, orthonormalize_transform
 from ..symmetry import Symmetry
 from .coarse import align_prerejective
 from .covariance import point_to_plane_information, tangent_covariance, xyz_rpy_covariance_of_inverse
@@ -37,9 +37,6 @@ from .search import (DistanceField, RadiusGrid, RangeImage, RotationHierarchy, r
                      so3_grid)
 
 _CALLER = "estimate_object_pose"
-#: Private calibration hook: when True, each covariance's linear terms are appended to _COVARIANCE_TERMS.
-_STORE_COVARIANCE_TERMS = False
-_COVARIANCE_TERMS: list = []
 
 
 @dataclass(frozen=True)
@@ -458,9 +455,7 @@ def _small_gicp_T(source: Any, model: PoseModel, cfg: PoseConfig, T_init: np.nda
                            num_threads=1, max_iterations=int(cfg.icp_max_iterations), rotation_epsilon=1e-4,
                            translation_epsilon=1e-5)
     T = np.array(res.T_target_source)
-    U, _, Vt = np.linalg.svd(T[:3, :3])  # as align_icp: re-orthonormalise
-    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    T[3] = [0.0, 0.0, 0.0, 1.0]
+    orthonormalize_transform(T)
     return T
 
 
@@ -479,9 +474,7 @@ def _icp_field_nearest(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_ini
     t0 = time.perf_counter()
     T, n_it, converged, _ = _icp_field_run(src, model, cfg, T_init, max_corr)
     t1 = time.perf_counter()
-    U, _, Vt = np.linalg.svd(T[:3, :3])  # as .icp._result
-    T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    T[3] = [0.0, 0.0, 0.0, 1.0]
+    orthonormalize_transform(T)
     p = src @ T[:3, :3].T + T[:3, 3]
     d, j = _nearest(model, p, max_corr)
     fitness, rmse, n_in = _inlier_statistics_of_distances(d, max_corr)
@@ -611,17 +604,6 @@ def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os:
                                      unobservable_variance_rad2=cfg.unobservable_variance_rad2)
         C_delta = _apply_floor(C_delta, cfg)
         cov = xyz_rpy_covariance_of_inverse(np.linalg.inv(T_so_can), C_delta)
-        if _STORE_COVARIANCE_TERMS:  # calibration (benchmarks/pose_accuracy.py --calibrate): cov is linear in these
-            base = tangent_covariance(B @ info @ B.T, sigma2, unobservable_rotation_axes=sym.unobservable_axes,
-                                      unobservable_variance_rad2=0.0)
-            Ts = np.linalg.inv(T_so_can)
-            E = np.zeros((2, 6, 6))
-            E[0, :3, :3] = E[1, 3:, 3:] = np.eye(3)
-            U = tangent_covariance(np.eye(6), 1.0, unobservable_rotation_axes=sym.unobservable_axes,
-                                   unobservable_variance_rad2=cfg.unobservable_variance_rad2) - \
-                tangent_covariance(np.eye(6), 1.0, unobservable_rotation_axes=sym.unobservable_axes,
-                                   unobservable_variance_rad2=0.0)
-            _COVARIANCE_TERMS.append([xyz_rpy_covariance_of_inverse(Ts, M) for M in (base, U, E[0], E[1])])
     else:
         cov = np.diag([1e2, 1e2, 1e2, 1e4, 1e4, 1e4])
     return (cov, T_so_can), sigma2
