@@ -12,7 +12,10 @@ def register(subparsers, common) -> None:
         description="Simulate a Girona 500-like mission over the four PVC fittings in a CIRS-like tank and "
                     "write it as a mission directory (mission.json, sensor CSVs, scans/*.pcd, ground_truth/).",
     )
-    p.add_argument("--out", required=True, metavar="DIR", help="mission directory to create")
+    p.add_argument("--out", required=True, metavar="DIR", help="mission directory (or bag) to create")
+    p.add_argument("--format", choices=("mission", "ros1", "ros2-mcap", "ros2-sqlite3"), default="mission",
+                   help="a mission directory (default, with ground truth), or a ROS bag as a vehicle would record it "
+                        "(no ground truth; OUT.vehicle.toml and OUT.topics.toml are written beside it)")
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed -> identical files; default 0)")
     p.add_argument("--loops", type=int, default=None, help="loops around the objects (default 3; 1 with --quick)")
     p.add_argument("--scan-rate", type=float, default=None, metavar="HZ",
@@ -49,10 +52,21 @@ def run(args: argparse.Namespace) -> int:
         interval = max(DEFAULT_SCAN_INTERVAL_S, 1.0 / cfg.scanner.scan_rate_hz) if cfg.scanner.scan_rate_hz > 0 else DEFAULT_SCAN_INTERVAL_S
     mission = simulate_mission(cfg, seed=args.seed, with_scans=not args.no_scans, scan_interval_s=interval,
                                progress=not getattr(args, "json", False))
-    out = write_mission(mission, args.out, overwrite=args.overwrite)
+    if args.format == "mission":
+        out = write_mission(mission, args.out, overwrite=args.overwrite)
+    else:
+        from .._atomic import atomic_write_text
+        from ..dataset import write_vehicle_toml
+        from ..dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
+
+        if args.format == "ros1" and not args.out.endswith(".bag"):
+            raise MissionError(f"A ROS 1 bag's name must end in .bag. Got {args.out!r} instead.")
+        out = write_bag(mission, args.out, args.format, overwrite=args.overwrite)
+        write_vehicle_toml(mission.vehicle, f"{out}.vehicle.toml")
+        atomic_write_text(f"{out}.topics.toml", SEMSLAM_TOPICS.to_toml())
     n_points = sum(s.n_points for s in mission.scans)
     payload = {
-        "directory": str(out), "seed": args.seed, "duration_s": mission.duration_s, "n_scans": len(mission.scans),
+        "directory": str(out), "format": args.format, "seed": args.seed, "duration_s": mission.duration_s, "n_scans": len(mission.scans),
         "n_points": n_points, "n_objects": len(mission.objects),
         "n_dvl": len(mission.dvl.stamp_s), "n_ahrs": len(mission.ahrs.stamp_s), "n_depth": len(mission.depth.stamp_s),
     }

@@ -66,6 +66,9 @@ class SlamResult:
     smoothed_position_ned_m: np.ndarray | None = None  #: (K, 3)
     smoothed_position_cov_m2: np.ndarray | None = None  #: (K, 3, 3)
     smoothed_velocity_body_mps: np.ndarray | None = None  #: (K, 3)
+    #: (K, 3) vehicle roll, pitch, yaw (rad, NED): the AHRS attitude at each epoch, yaw corrected by the estimated
+    #: yaw bias (the filter's attitude: an input, not a state, so it has no covariance here)
+    attitude_rpy_rad: np.ndarray | None = None
 
     @property
     def position_error_m(self) -> np.ndarray | None:

@@ -59,12 +59,13 @@ def write_run(result: SlamResult, out_dir: str | Path) -> Path:
     w = csv.writer(buf, lineterminator="\n")
     head = ["stamp_s", "x_m", "y_m", "z_m", "u_mps", "v_mps", "w_mps"]
     head += [f"cov_p_{a}{b}" for a in "xyz" for b in "xyz" if a <= b] + [f"cov_v_{a}{b}" for a in "uvw" for b in "uvw" if a <= b]
-    head += ["yaw_bias_rad"] + (["truth_x_m", "truth_y_m", "truth_z_m"] if result.truth_position_ned_m is not None else [])
+    head += ["yaw_bias_rad", "roll_rad", "pitch_rad", "yaw_rad"] + (["truth_x_m", "truth_y_m", "truth_z_m"] if result.truth_position_ned_m is not None else [])
     w.writerow(head)
     iu = np.triu_indices(3)
     for k in range(len(result.stamps_s)):
         row = [result.stamps_s[k], *result.position_ned_m[k], *result.velocity_body_mps[k],
-               *result.position_cov_m2[k][iu], *result.velocity_cov[k][iu], result.yaw_bias_rad[k]]
+               *result.position_cov_m2[k][iu], *result.velocity_cov[k][iu], result.yaw_bias_rad[k],
+               *(result.attitude_rpy_rad[k] if result.attitude_rpy_rad is not None else (np.nan,) * 3)]
         if result.truth_position_ned_m is not None:
             row += list(result.truth_position_ned_m[k])
         w.writerow([f"{v:.9g}" for v in row])

@@ -92,7 +92,7 @@ class SlamSession:
         self._processed_s = -math.inf
         self._t_end = -math.inf
         self._surveyed: list = []
-        self._H: dict[str, list] = {k: [] for k in ("t", "p", "Pp", "v", "Pv", "b", "bv", "c")}
+        self._H: dict[str, list] = {k: [] for k in ("t", "p", "Pp", "v", "Pv", "b", "bv", "c", "rpy")}
         self._next_hist = 0
         self._finished = False
 
@@ -261,6 +261,9 @@ class SlamSession:
         H["b"].append(ekf.yaw_bias_rad())
         H["bv"].append(ekf.yaw_bias_var_rad2())
         H["c"].append(ekf.dvl_calibration_state())
+        rpy = self.attitude.at(t)[0]
+        rpy[2] = (rpy[2] - ekf.yaw_bias_rad() + np.pi) % (2 * np.pi) - np.pi
+        H["rpy"].append(rpy)
 
     def _log(self, **kw) -> None:
         self.log.append(kw)
@@ -327,4 +330,4 @@ class SlamSession:
                           np.asarray(H["bv"]) if ekf.yaw_bias else None,
                           None if sm is None else sm.x[:, 0:3].copy(),
                           None if sm is None else sm.P[:, 0:3, 0:3].copy(),
-                          None if sm is None else sm.x[:, 3:6].copy())
+                          None if sm is None else sm.x[:, 3:6].copy(), np.asarray(H["rpy"]).reshape(-1, 3))

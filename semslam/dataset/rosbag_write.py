@@ -1,0 +1,131 @@
+"""Any dataset as a ROS bag (ROS 1 ``.bag``, ROS 2 ``mcap`` or ``sqlite3``), the way a vehicle would have
+recorded it: ``sensor_msgs/Imu`` (REP-103 ENU/FLU), a vendor DVL message ``semslam_msgs/msg/Dvl`` (velocity in the
+instrument frame, per-beam ranges and validity, its definition written into the bag), ``sensor_msgs/FluidPressure``
+and ``sensor_msgs/PointCloud2`` scans with a per-point ``t`` (float64 s from the scan's start). The topic map that
+reads it back is :data:`SEMSLAM_TOPICS`. Stamps start at :data:`TIME_ORIGIN_NS` (a whole second).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DatasetError
+from .dataset import Dataset
+from .rosbag import TopicMap
+
+FORMATS = ("ros1", "ros2-mcap", "ros2-sqlite3")
+TIME_ORIGIN_NS = 1_700_000_000 * 1_000_000_000
+DVL_TYPE = "semslam_msgs/msg/Dvl"
+#: the vendor DVL message (written into every bag: readers need no .msg file)
+DVL_MSG = """std_msgs/Header header
+geometry_msgs/Vector3 velocity   # bottom velocity (m/s) in the instrument frame (FRD)
+float64[4] beam_ranges_m         # slant range of each beam (m), NaN without a return
+bool[4] beam_valid               # beam locked on the bottom
+float64 figure_of_merit          # vendor quality figure (m/s)
+"""
+SEMSLAM_TOPICS = TopicMap(scans="/semslam/scans", attitude="/semslam/imu", dvl="/semslam/dvl", depth="/semslam/pressure",
+                          attitude_frame="enu", dvl_frame="frd")
+_G = 9.80665
+
+
+def _ns(t: float) -> int:
+    return TIME_ORIGIN_NS + int(round(float(t) * 1e9))
+
+
+def _messages(ds: Dataset, store, T):
+    """``(stamp_ns, topic, msgtype, message)`` of every log sample and scan, in time order."""
+    from ..geometry import rotation_from_rpy
+    from ..io.ros import quat_xyzw_from_R_world_ned_vehicle_frd
+    from ..io.ros._encode import encode_pointcloud2, ros_header
+
+    out = []
+    vec = lambda v: T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa: E731
+    for t, rpy in zip(ds.attitude.stamp_s, ds.attitude.rpy_rad):
+        q = quat_xyzw_from_R_world_ned_vehicle_frd(rotation_from_rpy(*rpy))  # REP-103: ENU world, FLU body
+        msg = T["sensor_msgs/msg/Imu"](
+            header=ros_header(store, _ns(t), "base_link"),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            orientation_covariance=np.diag(np.asarray(ds.vehicle.attitude.noise_rpy_rad) ** 2).reshape(-1),
+            angular_velocity=vec((0, 0, 0)), angular_velocity_covariance=np.r_[-1.0, np.zeros(8)],
+            linear_acceleration=vec((0, 0, 0)), linear_acceleration_covariance=np.r_[-1.0, np.zeros(8)])
+        out.append((_ns(t), 0, "/semslam/imu", "sensor_msgs/msg/Imu", msg))
+    d = ds.dvl
+    nb = len(ds.vehicle.dvl.beam_azimuth_rad)
+    for k, t in enumerate(d.stamp_s):
+        r = d.beam_range_m[k] if d.beam_range_m is not None else np.full(nb, np.nan)
+        if len(r) != 4:
+            raise DatasetError(f"semslam's vendor DVL message has 4 beams. Got {len(r)} beam ranges instead.")
+        valid = np.isfinite(r) & bool(d.valid[k])
+        if d.valid[k] and not valid.any():
+            valid[:] = True  # a valid velocity without range data: mark the beams locked, ranges unknown
+        msg = T[DVL_TYPE](header=ros_header(store, _ns(t), "dvl"), velocity=vec(d.velocity_body_mps[k]),
+                          beam_ranges_m=np.asarray(r, dtype=np.float64), beam_valid=valid,
+                          figure_of_merit=float(ds.vehicle.dvl.noise_abs_mps))
+        out.append((_ns(t), 1, "/semslam/dvl", DVL_TYPE, msg))
+    dep = ds.vehicle.depth
+    for t, z in zip(ds.depth.stamp_s, ds.depth.depth_m):
+        p = dep.atmospheric_pressure_pa + dep.water_density_kg_m3 * _G * float(z)
+        msg = T["sensor_msgs/msg/FluidPressure"](header=ros_header(store, _ns(t), "pressure"), fluid_pressure=p,
+                                                 variance=(dep.water_density_kg_m3 * _G * dep.noise_m) ** 2)
+        out.append((_ns(t), 2, "/semslam/pressure", "sensor_msgs/msg/FluidPressure", msg))
+    for rec in ds.scans:
+        cloud = ds.load_scan(rec.scan_id)
+        stamps = ds.point_stamps_s(rec, cloud)
+        start_ns = _ns(rec.start_stamp_s)
+        offs = (stamps - (start_ns - TIME_ORIGIN_NS) / 1e9) if stamps is not None else np.zeros(cloud.n_points)
+        msg = encode_pointcloud2(cloud.points_xyz_m, intensity=cloud.intensity, time_offset_s=offs, time_field="t",
+                                 time_encoding="float64_s", frame_id="scanner", stamp_ns=start_ns, typestore=store)
+        out.append((start_ns, 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg))
+    out.sort(key=lambda m: (m[0], m[1]))
+    return [(ns, topic, mt, msg) for ns, _, topic, mt, msg in out]
+
+
+def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap", *, overwrite: bool = False) -> Path:
+    """Write ``dataset`` as a bag (see the module docstring); atomic (a temporary sibling, renamed at the end)."""
+    from rosbags.typesys import get_types_from_msg
+
+    from ..io.ros._encode import default_typestore
+
+    if fmt not in FORMATS:
+        raise DatasetError(f"The 'fmt' argument of write_bag must be one of {FORMATS}. Got {fmt!r} instead.")
+    out = Path(path)
+    if out.exists() and not overwrite:
+        raise DatasetError(f"The bag {str(out)!r} exists: choose another path, or overwrite it.")
+    ros1 = fmt == "ros1"
+    store = default_typestore(ros1=ros1)
+    store.register(get_types_from_msg(DVL_MSG, DVL_TYPE))
+    msgs = _messages(dataset, store, store.types)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    tmp = tmpdir / out.name
+    try:
+        if ros1:
+            from rosbags.rosbag1 import Writer
+
+            with Writer(tmp) as writer:
+                conns = {}
+                for ns, topic, mt, msg in msgs:
+                    if topic not in conns:
+                        conns[topic] = writer.add_connection(topic, mt, typestore=store)
+                    writer.write(conns[topic], ns, store.serialize_ros1(msg, mt))
+        else:
+            from rosbags.rosbag2 import StoragePlugin, Writer
+
+            plugin = StoragePlugin.MCAP if fmt == "ros2-mcap" else StoragePlugin.SQLITE3
+            with Writer(tmp, version=9, storage_plugin=plugin) as writer:
+                conns = {}
+                for ns, topic, mt, msg in msgs:
+                    if topic not in conns:
+                        conns[topic] = writer.add_connection(topic, mt, typestore=store)
+                    writer.write(conns[topic], ns, store.serialize_cdr(msg, mt))
+        if out.exists():
+            shutil.rmtree(out) if out.is_dir() else out.unlink()
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+    return out
