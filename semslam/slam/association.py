@@ -20,8 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
 from ..detection import Detection
 from ..geometry import RigidTransform, rpy_from_rotation, rotation_from_rpy, wrap_angle
@@ -199,6 +197,8 @@ class GateThresholds:
     probability: float = 0.99
 
     def threshold(self, dof: int) -> float:
+        from scipy.stats import chi2  # lazily: scipy.stats costs ~1 s to import
+
         return float(chi2.ppf(self.probability, dof))
 
 
@@ -208,6 +208,8 @@ def associate(d2: np.ndarray, gate: np.ndarray) -> list[tuple[int, int]]:
     if d2.size == 0:
         return []
     cost = np.where(gate, d2, 1e12)
+    from scipy.optimize import linear_sum_assignment
+
     rows, cols = linear_sum_assignment(cost)
     return [(int(r), int(c)) for r, c in zip(rows, cols) if gate[r, c]]
 
@@ -252,7 +254,7 @@ def associate_jcbb(innovations: dict[tuple[int, int], Innovation], ekf: Semantic
             if j in used:
                 continue
             cand = pairs + [(i, int(j))]
-            if joint_d2(cand) <= chi2.ppf(probability, 3 * len(cand)):
+            if joint_d2(cand) <= GateThresholds(probability).threshold(3 * len(cand)):
                 recurse(i + 1, cand, used | {int(j)})
         recurse(i + 1, pairs, used)
 

@@ -11,12 +11,13 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
 
 
 def chi2_band(dof: int, n: int, probability: float = 0.95) -> tuple[float, float]:
     """Two-sided band of the mean of ``n`` independent chi-square(dof) variables."""
     a = (1.0 - probability) / 2.0
+    from scipy.stats import chi2  # lazily: scipy.stats costs ~1 s to import
+
     return float(chi2.ppf(a, dof * n) / n), float(chi2.ppf(1.0 - a, dof * n) / n)
 
 
@@ -31,6 +32,8 @@ def trajectory_metrics(est_m: np.ndarray, truth_m: np.ndarray, covs: np.ndarray)
     err = est_m - truth_m
     dist = np.linalg.norm(err, axis=1)
     e = nees(err, covs)
+    from scipy.stats import chi2
+
     lo, hi = chi2.ppf(0.025, 3), chi2.ppf(0.975, 3)
     sigma3 = 3.0 * np.sqrt(np.trace(covs, axis1=1, axis2=2))
     band = chi2_band(3, len(e))
