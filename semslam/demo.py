@@ -309,12 +309,10 @@ def _write_consensus(out: Path, mission, detections_by_scan: dict, pose_result) 
 
 
 def _consensus_params(result) -> dict:
-    c = getattr(result.config, "consensus", None)
-    if c is None:
-        return {}
-    d = c if isinstance(c, dict) else (c.to_dict() if hasattr(c, "to_dict") else asdict(c))
-    keys = ("position_threshold_m", "attitude_threshold", "min_observations", "max_age_s", "use_attitude")
-    return {k: d[k] for k in keys if k in d}
+    """The consensus rule the run used (its SlamConfig), for the figure's replay."""
+    c = result.config.initialisation
+    return {"position_threshold_m": c.consensus_position_m, "attitude_threshold": c.consensus_attitude,
+            "min_observations": c.consensus_min_observations, "max_age_s": c.consensus_max_age_s}
 
 
 def _headline_metrics(evaluations: dict, recognition: dict, slam_results: dict) -> dict:

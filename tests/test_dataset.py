@@ -50,8 +50,8 @@ def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
 def test_a_numpy_dataset_runs_through_slam_session_and_run_slam():
     """run_slam is the loop over the session: the same numbers; dead reckoning tracks the straight run."""
     ds = numpy_dive()
-    a = run_slam(ds, mode="dr", config=SlamConfig(perturb_initial_position=False))
-    s = SlamSession(ds.vehicle, mode="dr", config=SlamConfig(perturb_initial_position=False), start_stamp_s=0.0,
+    a = run_slam(ds, mode="dr", config=SlamConfig().updated(perturb_initial_position=False))
+    s = SlamSession(ds.vehicle, mode="dr", config=SlamConfig().updated(perturb_initial_position=False), start_stamp_s=0.0,
                     initial_position_ned_m=[0.0, 0.0, 3.0], initial_velocity_body_mps=ds.dvl.velocity_body_mps[0])
     for t, kind, payload in merged_messages(ds, {}):
         if kind == "attitude":
@@ -100,7 +100,7 @@ def test_simulated_mission_same_run_in_memory_from_disk_and_streamed(sim_mission
 
     sym = builtin_symmetries()
     dets = simulate_detections(sim_mission, truth_detection_config(sim_mission), seed=1, symmetries=sym)
-    cfg = SlamConfig(perturb_initial_position=False)
+    cfg = SlamConfig().updated(perturb_initial_position=False)
     a = run_slam(sim_mission, dets, mode="pose", config=cfg, symmetries=sym)
     back = read_mission(write_mission(sim_mission, tmp_path / "m"))
     assert back.dvl.beam_range_m is not None and back.vehicle.to_dict() == sim_mission.vehicle.to_dict()

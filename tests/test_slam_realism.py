@@ -72,7 +72,7 @@ def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_vehicle():
 def test_surveyed_landmark_makes_a_constant_yaw_bias_observable():
     bias = math.radians(2.0)
     m = square_mission(seed=2, loops=2, yaw_bias_rad=bias)
-    cfg = SlamConfig(surveyed_objects=("reducing_socket_0",))
+    cfg = SlamConfig().updated(surveyed_objects=("reducing_socket_0",))
     pose = run_truth_slam(m, mode="pose", config=cfg, seed=2, symmetries={})
     head = run_truth_slam(m, mode="pose+heading", config=cfg, seed=2, symmetries={})
     assert head.yaw_bias_rad[-1] == pytest.approx(bias, abs=math.radians(0.8))  # from ~0 (prior mean)
@@ -81,7 +81,7 @@ def test_surveyed_landmark_makes_a_constant_yaw_bias_observable():
     free = run_truth_slam(m, mode="pose+heading", seed=2, symmetries={})  # no reference: the bias stays at its prior
     assert abs(free.yaw_bias_rad[-1]) < math.radians(1.0)
     with pytest.raises(Exception, match="surveyed_objects"):
-        run_truth_slam(m, mode="pose", config=SlamConfig(surveyed_objects=("nothing",)), seed=0)
+        run_truth_slam(m, mode="pose", config=SlamConfig().updated(surveyed_objects=("nothing",)), seed=0)
 
 
 def test_observability_constraint_keeps_a_constant_yaw_bias_unobservable():
@@ -93,9 +93,9 @@ def test_observability_constraint_keeps_a_constant_yaw_bias_unobservable():
     m = square_mission(seed=4, loops=2)
     runs = {}
     for oc in (True, False):
-        cfg = SlamConfig(observability_constrained=oc)
+        cfg = SlamConfig().updated(observability_constrained=oc)
         runs[oc] = run_truth_slam(m, mode="pose+heading", config=cfg, seed=0, symmetries={})
-    prior = SlamConfig().yaw_bias_sigma_rad ** 2
+    prior = SlamConfig().motion.yaw_bias_sigma_rad ** 2
     np.testing.assert_allclose(runs[True].yaw_bias_var_rad2, prior, rtol=1e-9)
     assert np.abs(runs[True].yaw_bias_rad).max() < 1e-9
     assert runs[False].yaw_bias_var_rad2[-1] < 0.95 * prior  # spurious information

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -241,6 +242,35 @@ def test_a_landmark_initialised_while_the_vehicle_drifts_is_not_mapped_twice():
 
     m = make_mission(12)
     assert m.truth is not None and m.objects  # the simulator is part of the package: never a skip
-    r = run_truth_slam(m, mode="pose", seed=12, config=SlamConfig(smooth=False))
+    r = run_truth_slam(m, mode="pose", seed=12, config=SlamConfig().updated(smooth=False))
     assert sorted(lm.label for lm in r.landmarks) == sorted(o.label for o in m.objects)
     assert all(lm.position_error_m < 0.05 for lm in r.landmarks)
+
+
+def test_slam_config_sections_round_trip_and_errors(tmp_path, capsys):
+    """One config story: to_dict/from_dict round trip, ``updated`` routes a setting to its section, and a run's
+    config.json given back as --config repeats the run exactly; bad files are one-line errors."""
+    from semslam.errors import ConfigError
+
+    cfg = SlamConfig().updated(smooth=False, initial_position_sigma_m=0.01, velocity_rw_mps_per_sqrt_s=0.03)
+    assert cfg.output.smooth is False and cfg.initialisation.initial_position_sigma_m == 0.01
+    assert SlamConfig.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+    for bad, words in (({"motion": {"smooth": False}}, "motion.smooth"), ({"filter": {}}, "filter"),
+                       ({"output": {"smooth": "false"}}, "true or false"), ({"gating": {"gate_probability": 2}}, "(0.5, 1)"),
+                       ({"initialisation": {"initial_position_sigma_m": 0}}, "> 0")):
+        with pytest.raises(ConfigError, match=re.escape(words)):
+            SlamConfig.from_dict(bad)
+    with pytest.raises(ConfigError, match="Unknown SlamConfig setting 'smoothing'"):
+        SlamConfig().updated(smoothing=False)
+    toml = tmp_path / "slam.toml"
+    toml.write_text("[slam.output]\nhistory_rate_hz = 1.0\n[slam.initialisation]\ninitial_position_sigma_m = 0.005\n")
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(["slam", "synthetic:3", "--mode", "pose", "--out", str(a), "--config", str(toml)]) == 0
+    assert json.loads((a / "config.json").read_text())["output"]["history_rate_hz"] == 1.0
+    assert main(["slam", "synthetic:3", "--mode", "pose", "--out", str(b), "--config", str(a / "config.json")]) == 0
+    assert (a / "trajectory.csv").read_text() == (b / "trajectory.csv").read_text()
+    capsys.readouterr()
+    toml.write_text("[slam.output]\nhistory_hz = 1.0\n")
+    assert main(["slam", "synthetic:3", "--out", str(tmp_path / "c"), "--config", str(toml)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "output.history_hz" in err[0] and str(toml) in err[0]

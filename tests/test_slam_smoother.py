@@ -109,7 +109,7 @@ def test_recording_leaves_the_filter_unchanged():
 
 def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_path):
     mission = square_mission(seed=2, loops=2)
-    off = run_truth_slam(mission, mode="pose", config=SlamConfig(smooth=False), seed=2)
+    off = run_truth_slam(mission, mode="pose", config=SlamConfig().updated(smooth=False), seed=2)
     on = run_truth_slam(mission, mode="pose", seed=2)
     np.testing.assert_array_equal(off.position_ned_m, on.position_ned_m)
     assert off.smoothed_position_ned_m is None and "smoother" not in off.metrics
@@ -129,7 +129,7 @@ def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_
 
 def test_smoother_over_budget_is_skipped_and_says_so(tmp_path):
     mission = square_mission(seed=1, loops=1)
-    res = run_truth_slam(mission, mode="pose", config=SlamConfig(smoother_max_mb=0.01), seed=1)
+    res = run_truth_slam(mission, mode="pose", config=SlamConfig().updated(smoother_max_mb=0.01), seed=1)
     assert res.metrics["smoother"]["status"].startswith("skipped")
     assert "ate_rmse_m" not in res.metrics["smoother"]
     assert res.smoothed_position_ned_m is None

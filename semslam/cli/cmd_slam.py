@@ -60,11 +60,10 @@ def run(args: argparse.Namespace) -> int:
     from ._output import emit
 
     mission = load_dataset(args.mission, args.vehicle)
-    overrides = read_config_file(args.config) if args.config else {}
-    overrides = dict(overrides.get("slam", overrides))
+    raw = read_config_file(args.config) if args.config else {}
+    cfg = SlamConfig.from_dict(raw.get("slam", raw), source=f"the --config file {args.config!r}")
     if args.surveyed:
-        overrides["surveyed_objects"] = tuple(args.surveyed)
-    cfg = SlamConfig.from_dict(overrides, source=f"the --config file {args.config!r}" if args.config else "the options")
+        cfg = cfg.updated(surveyed_objects=tuple(args.surveyed))
     dets = None
     if args.detections and args.detections != "truth":
         dets = read_detections_jsonl(args.detections)

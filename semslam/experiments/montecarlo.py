@@ -117,7 +117,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
         mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
                                yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
                                white_dvl=white_dvl)
-        cfg = SlamConfig(**(config_overrides or {}))
+        cfg = SlamConfig().updated(**(config_overrides or {}))
         for mode in modes:
             res = run_truth_slam(mission, mode=mode, config=cfg, seed=seed + i)
             if res.truth_position_ned_m is None:

@@ -1,13 +1,25 @@
-"""Settings of the semantic EKF-SLAM: how the filter models motion, gates, initialises and records.
+"""Settings of the semantic EKF-SLAM, in sections: how the filter models motion (``motion``), gates and associates
+(``gating``), starts and creates landmarks (``initialisation``), keeps a large map (``map``) and records the run
+(``output``).
 
 The sensor figures (DVL, AHRS, depth noise; DVL beam geometry) are not here: they come from the vehicle
 description (:class:`semslam.dataset.VehicleDescription`), as a real vehicle's data sheets give them.
+
+As a file (``semslam slam --config slam.toml``; a run's ``config.json`` has the same form)::
+
+    [slam.motion]
+    velocity_rw_mps_per_sqrt_s = [0.02, 0.01, 0.01]
+    [slam.initialisation]
+    initial_position_sigma_m = 0.01
+    [slam.output]
+    smooth = false
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 from .._validation import check_choice
 from ..errors import ConfigError
@@ -16,9 +28,28 @@ from ..errors import ConfigError
 MODES = ("dr", "position", "pose", "pose+heading")
 
 
+def _check_types(obj) -> None:
+    """Strict types (no truthy strings, no bools for numbers) and finite numbers for a section dataclass."""
+    name = type(obj).__name__
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if f.type in ("float", "int") and (isinstance(v, bool) or not isinstance(v, (int, float))):
+            raise ConfigError(f"The {f.name!r} field of {name} must be a number. Got {v!r} instead.")
+        if f.type == "bool" and not isinstance(v, bool):
+            raise ConfigError(f"The {f.name!r} field of {name} must be true or false. Got {v!r} instead.")
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(f"The {f.name!r} field of {name} must be finite. Got {v!r} instead.")
+
+
+def _positive(obj, *names) -> None:
+    for n in names:
+        if getattr(obj, n) <= 0:
+            raise ConfigError(f"The {n!r} field of {type(obj).__name__} must be > 0. Got {getattr(obj, n)!r} instead.")
+
+
 @dataclass(frozen=True)
-class SlamConfig:
-    """Filter settings (SI units, radians)."""
+class MotionConfig:
+    """The motion model and the states it estimates."""
 
     #: white body-frame acceleration noise (m/s/sqrt(s)): one number, or (surge, sway, heave). The default follows
     #: a teleoperated vehicle (simulator truth in cruise: surge acceleration rms 0.018 m/s^2 from a 0.02 m/s speed
@@ -26,45 +57,19 @@ class SlamConfig:
     #: are caught by the DVL's manoeuvre reset). (0.05, 0.01, 0.02) made the filter pessimistic; a near-zero surge
     #: noise would be right only for a vehicle that never changes speed (and diverges at the launch ramp)
     velocity_rw_mps_per_sqrt_s: float | tuple = (0.02, 0.01, 0.01)
+    max_predict_dt_s: float = 0.1
+    propagate_attitude_noise: bool = True
     #: estimate the DVL's calibration (bias, degraded-bottom bias, scale factor, misalignment) when the vehicle
     #: description gives non-zero figures for it
     dvl_calibration: bool = True
     #: tell a flat bottom from a slope by the DVL's per-beam ranges (when the log has them); else both noise
     #: hypotheses (nominal, degraded) are tried on every sample
     dvl_use_beam_ranges: bool = True
-    propagate_attitude_noise: bool = True
+    #: prior standard deviation of the AHRS yaw bias (pose+heading mode)
     yaw_bias_sigma_rad: float = math.radians(3.0)
     #: pose+heading without surveyed landmarks: keep the unobservable common rotation (map, trajectory and bias)
     #: unobservable (observability-constrained EKF, see SemanticEkf.constrain_heading_nullspace)
     observability_constrained: bool = True
-    #: the launch point defines the world frame (as in the papers, whose ground truth starts at the vehicle's start):
-    #: the filter knows it to this standard deviation per axis (a surveyed mark; 0.01 for a 1 cm fix), and a
-    #: simulated start is drawn from it (``perturb_initial_position``) so that the initial NEES is chi-square
-    initial_position_sigma_m: float = 0.001
-    initial_velocity_sigma_mps: float = 0.05
-    perturb_initial_position: bool = True
-    surveyed_objects: tuple = ()
-    survey_position_sigma_m: float = 0.01
-    survey_rotation_sigma_rad: float = math.radians(0.5)
-    max_predict_dt_s: float = 0.1
-    gate_probability: float = 0.99
-    sensor_gate_probability: float = 0.9999
-    sensor_gate_max_rejections: int = 5
-    association: str = "nn"
-    orientation_innovation: str = "rotvec"
-    consensus_position_m: float = 0.3
-    consensus_attitude: float = 0.02
-    consensus_min_observations: int = 4
-    consensus_max_age_s: float = 60.0
-    candidate_radius_m: float = 10.0
-    dense_max_landmarks: int = 50
-    active_radius_m: float = 10.0
-    unobservable_var_rad2: float = 0.25
-    history_rate_hz: float = 2.0
-    #: also estimate the trajectory from the whole mission (RTS smoother, offline; the filter is unchanged)
-    smooth: bool = True
-    #: memory budget of the smoother (MB): beyond it the smoothed trajectory is skipped, and metrics say so
-    smoother_max_mb: float = 512.0
 
     def __post_init__(self) -> None:
         vrw = self.velocity_rw_mps_per_sqrt_s
@@ -74,46 +79,165 @@ class SlamConfig:
             except (TypeError, ValueError):
                 vrw = ()
             if len(vrw) != 3 or not all(math.isfinite(x) and x >= 0 for x in vrw):
-                raise ConfigError("The 'velocity_rw_mps_per_sqrt_s' field of SlamConfig must be a number or three "
+                raise ConfigError("The 'velocity_rw_mps_per_sqrt_s' field of MotionConfig must be a number or three "
                                   f"finite numbers >= 0 (surge, sway, heave). Got {self.velocity_rw_mps_per_sqrt_s!r} instead.")
             object.__setattr__(self, "velocity_rw_mps_per_sqrt_s", vrw)
-        check_choice("association", self.association, ("nn", "jcbb"), caller="SlamConfig")
-        check_choice("orientation_innovation", self.orientation_innovation, ("rotvec", "rpy"), caller="SlamConfig")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.type in ("float", "int") and (isinstance(v, bool) or not isinstance(v, (int, float))):
-                raise ConfigError(f"The {f.name!r} field of SlamConfig must be a number. Got {v!r} instead.")
-            if f.type == "bool" and not isinstance(v, bool):
-                raise ConfigError(f"The {f.name!r} field of SlamConfig must be true or false. Got {v!r} instead.")
-            if isinstance(v, float) and not math.isfinite(v):
-                raise ConfigError(f"The {f.name!r} field of SlamConfig must be finite. Got {v!r} instead.")
-        for name in ("max_predict_dt_s", "history_rate_hz", "consensus_position_m", "smoother_max_mb",
-                     "initial_velocity_sigma_mps", "consensus_max_age_s"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(f"The {name!r} field of SlamConfig must be > 0. Got {getattr(self, name)!r} instead.")
-        if self.consensus_min_observations < 1 or self.sensor_gate_max_rejections < 0:
-            raise ConfigError("SlamConfig needs consensus_min_observations >= 1 and sensor_gate_max_rejections >= 0.")
+        elif not (math.isfinite(vrw) and vrw >= 0):
+            raise ConfigError(f"The 'velocity_rw_mps_per_sqrt_s' field of MotionConfig must be >= 0. Got {vrw!r} instead.")
+        _check_types(self)
+        _positive(self, "max_predict_dt_s")
+
+
+@dataclass(frozen=True)
+class GatingConfig:
+    """Chi-square gates of the object and sensor updates, and data association."""
+
+    gate_probability: float = 0.99
+    sensor_gate_probability: float = 0.9999
+    #: after this many rejected DVL/depth samples in a row the prediction, not the sensor, is wrong: accept
+    sensor_gate_max_rejections: int = 5
+    association: str = "nn"
+    orientation_innovation: str = "rotvec"
+    #: landmarks farther than this from the vehicle are not association candidates (m)
+    candidate_radius_m: float = 10.0
+
+    def __post_init__(self) -> None:
+        check_choice("association", self.association, ("nn", "jcbb"), caller="GatingConfig")
+        check_choice("orientation_innovation", self.orientation_innovation, ("rotvec", "rpy"), caller="GatingConfig")
+        _check_types(self)
         if not 0.5 < self.gate_probability < 1.0 or not 0.5 < self.sensor_gate_probability < 1.0:
-            raise ConfigError("The gate probabilities of SlamConfig must be in (0.5, 1). Got "
+            raise ConfigError("The gate probabilities of GatingConfig must be in (0.5, 1). Got "
                               f"{self.gate_probability!r} and {self.sensor_gate_probability!r} instead.")
+        if self.sensor_gate_max_rejections < 0:
+            raise ConfigError(f"The 'sensor_gate_max_rejections' field of GatingConfig must be >= 0. Got "
+                              f"{self.sensor_gate_max_rejections!r} instead.")
+        _positive(self, "candidate_radius_m")
+
+
+@dataclass(frozen=True)
+class InitialisationConfig:
+    """The start of the run and the creation of landmarks (consensus of detections, surveyed objects)."""
+
+    #: the launch point defines the world frame (as in the papers, whose ground truth starts at the vehicle's start):
+    #: the filter knows it to this standard deviation per axis (a surveyed mark; 0.01 for a 1 cm fix), and a
+    #: simulated start is drawn from it (``perturb_initial_position``) so that the initial NEES is chi-square
+    initial_position_sigma_m: float = 0.001
+    initial_velocity_sigma_mps: float = 0.05
+    perturb_initial_position: bool = True
+    consensus_position_m: float = 0.3
+    consensus_attitude: float = 0.02
+    consensus_min_observations: int = 4
+    consensus_max_age_s: float = 60.0
+    #: variance (rad^2) given to a detection's rotation about an axis its object's symmetry leaves unobservable
+    unobservable_var_rad2: float = 0.25
+    surveyed_objects: tuple = ()
+    survey_position_sigma_m: float = 0.01
+    survey_rotation_sigma_rad: float = math.radians(0.5)
+
+    def __post_init__(self) -> None:
         if isinstance(self.surveyed_objects, str) or not all(isinstance(n, str) for n in self.surveyed_objects):
-            raise ConfigError(f"The 'surveyed_objects' field of SlamConfig must be a sequence of object names. "
-                              f"Got {self.surveyed_objects!r} instead.")
+            raise ConfigError(f"The 'surveyed_objects' field of InitialisationConfig must be a sequence of object "
+                              f"names. Got {self.surveyed_objects!r} instead.")
         object.__setattr__(self, "surveyed_objects", tuple(self.surveyed_objects))
+        _check_types(self)
+        _positive(self, "initial_position_sigma_m", "initial_velocity_sigma_mps", "consensus_position_m",
+                  "consensus_attitude", "consensus_max_age_s", "unobservable_var_rad2", "survey_position_sigma_m",
+                  "survey_rotation_sigma_rad")
+        if self.consensus_min_observations < 1:
+            raise ConfigError(f"The 'consensus_min_observations' field of InitialisationConfig must be >= 1. Got "
+                              f"{self.consensus_min_observations!r} instead.")
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """A large map: the dense filter up to ``dense_max_landmarks``, then an active area around the vehicle."""
+
+    dense_max_landmarks: int = 50
+    active_radius_m: float = 10.0
+
+    def __post_init__(self) -> None:
+        _check_types(self)
+        _positive(self, "active_radius_m")
+        if self.dense_max_landmarks < 0:
+            raise ConfigError(f"The 'dense_max_landmarks' field of MapConfig must be >= 0. Got "
+                              f"{self.dense_max_landmarks!r} instead.")
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """What the run records: the history rate and the RTS-smoothed trajectory."""
+
+    history_rate_hz: float = 2.0
+    #: also estimate the trajectory from the whole mission (RTS smoother, offline; the filter is unchanged)
+    smooth: bool = True
+    #: memory budget of the smoother (MB): beyond it the smoothed trajectory is skipped, and metrics say so
+    smoother_max_mb: float = 512.0
+
+    def __post_init__(self) -> None:
+        _check_types(self)
+        _positive(self, "history_rate_hz", "smoother_max_mb")
+
+
+_SECTIONS = {"motion": MotionConfig, "gating": GatingConfig, "initialisation": InitialisationConfig,
+             "map": MapConfig, "output": OutputConfig}
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """Filter settings (SI units, radians), in sections (see the module docstring)."""
+
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    gating: GatingConfig = field(default_factory=GatingConfig)
+    initialisation: InitialisationConfig = field(default_factory=InitialisationConfig)
+    map: MapConfig = field(default_factory=MapConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+
+    def __post_init__(self) -> None:
+        for name, cls in _SECTIONS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise ConfigError(f"The {name!r} section of SlamConfig must be a {cls.__name__}. Got "
+                                  f"{type(getattr(self, name)).__name__} instead.")
+
+    def updated(self, **settings: Any) -> "SlamConfig":
+        """A copy with the named settings changed, whatever their section (names are unique):
+        ``SlamConfig().updated(smooth=False, initial_position_sigma_m=0.01)``."""
+        sections: dict[str, dict] = {}
+        for key, value in settings.items():
+            sec = next((s for s, cls in _SECTIONS.items() if key in {f.name for f in fields(cls)}), None)
+            if sec is None:
+                raise ConfigError(f"Unknown SlamConfig setting {key!r}. Expected one of "
+                                  f"{sorted(f.name for cls in _SECTIONS.values() for f in fields(cls))}.")
+            sections.setdefault(sec, {})[key] = value
+        return replace(self, **{s: replace(getattr(self, s), **kw) for s, kw in sections.items()})
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["surveyed_objects"] = list(self.surveyed_objects)
-        if isinstance(self.velocity_rw_mps_per_sqrt_s, tuple):
-            d["velocity_rw_mps_per_sqrt_s"] = list(self.velocity_rw_mps_per_sqrt_s)
-        return d
+        out = {}
+        for name in _SECTIONS:
+            d = asdict(getattr(self, name))
+            out[name] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+        return out
 
     @classmethod
-    def from_dict(cls, d: dict, *, source: str = "a SlamConfig record") -> "SlamConfig":
+    def from_dict(cls, d: Any, *, source: str = "a SlamConfig record") -> "SlamConfig":
+        """From :meth:`to_dict`'s form: a table per section, every key optional; unknown sections or keys and
+        wrong types raise :class:`~semslam.errors.ConfigError` naming ``source``."""
         if not isinstance(d, dict):
-            raise ConfigError(f"{source} must be a table of SlamConfig fields. Got {type(d).__name__} instead.")
-        names = {f.name for f in fields(cls)}
-        unknown = set(d) - names
+            raise ConfigError(f"{source} must be a table of SlamConfig sections. Got {type(d).__name__} instead.")
+        unknown = sorted(set(d) - set(_SECTIONS))
         if unknown:
-            raise ConfigError(f"Unknown field(s) {sorted(unknown)} in {source}. Expected some of {sorted(names)}.")
-        return cls(**d)
+            raise ConfigError(f"Unknown section(s) {unknown} in {source}. Expected some of {sorted(_SECTIONS)}.")
+        kw = {}
+        for name, table in d.items():
+            scls = _SECTIONS[name]
+            if not isinstance(table, dict):
+                raise ConfigError(f"The [{name}] section of {source} must be a table. Got {table!r} instead.")
+            names = {f.name for f in fields(scls)}
+            bad = sorted(set(table) - names)
+            if bad:
+                raise ConfigError(f"Unknown key(s) {[f'{name}.{k}' for k in bad]} in {source}. Expected some of "
+                                  f"{sorted(f'{name}.{k}' for k in names)}.")
+            try:
+                kw[name] = scls(**table)
+            except ConfigError as exc:
+                raise ConfigError(f"{source}: {exc}") from None
+        return cls(**kw)

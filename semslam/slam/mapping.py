@@ -49,9 +49,9 @@ class ObjectMapper:
                  T_vehicle_scanner: RigidTransform, log: Callable[..., None]) -> None:
         self.ekf, self.cfg, self.sym, self.T_vs, self._log = ekf, cfg, symmetries, T_vehicle_scanner, log
         self.test = "position" if mode == "position" else "pose"
-        self.consensus = ConsensusInitializer(cfg.consensus_position_m, cfg.consensus_attitude,
-                                              cfg.consensus_min_observations, cfg.consensus_max_age_s)
-        gate = GateThresholds(cfg.gate_probability)
+        self.consensus = ConsensusInitializer(cfg.initialisation.consensus_position_m, cfg.initialisation.consensus_attitude,
+                                              cfg.initialisation.consensus_min_observations, cfg.initialisation.consensus_max_age_s)
+        gate = GateThresholds(cfg.gating.gate_probability)
         self._thr = {d: gate.threshold(d) for d in range(1, 7)}
 
     # ------------------------------------------------------------------ surveyed landmarks
@@ -75,19 +75,19 @@ class ObjectMapper:
         ekf, cfg = self.ekf, self.cfg
         if ekf.is_active(j):
             return
-        if len(ekf.landmarks) <= cfg.dense_max_landmarks:
+        if len(ekf.landmarks) <= cfg.map.dense_max_landmarks:
             ids = range(len(ekf.landmarks))
         else:
             ekf.flush()
             d = np.linalg.norm(ekf.landmark_positions() - ekf.position_ned_m, axis=1)
-            ids = set(np.flatnonzero(d < cfg.active_radius_m).tolist()) | {j}
+            ids = set(np.flatnonzero(d < cfg.map.active_radius_m).tolist()) | {j}
         ekf.set_active_landmarks(ids)
 
     def process(self, t: float, dets: list[Detection], R_ahrs: np.ndarray, att_cov: np.ndarray | None) -> None:
         """Associate the detections of one stamp with the map (per class), update, or start candidates."""
         ekf, cfg = self.ekf, self.cfg
         meas = [measurement_from_detection(d, self.T_vs, symmetry=self.sym.get(d.label),
-                                           unobservable_var_rad2=cfg.unobservable_var_rad2, index=k)
+                                           unobservable_var_rad2=cfg.initialisation.unobservable_var_rad2, index=k)
                 for k, d in enumerate(dets)]
         labels = [lm.label for lm in ekf.landmarks]
         lpos = ekf.landmark_positions()
@@ -96,17 +96,17 @@ class ObjectMapper:
         for label in sorted({x.label for x in meas}):
             M = [x for x in meas if x.label == label]
             L = [j for j, lb in enumerate(labels) if lb == label
-                 and np.linalg.norm(lpos[j] - p) < cfg.candidate_radius_m]
+                 and np.linalg.norm(lpos[j] - p) < cfg.gating.candidate_radius_m]
             d2 = np.full((len(M), len(L)), np.inf)
             inns = {}
             for a, x in enumerate(M):
                 for b, j in enumerate(L):
-                    inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=cfg.orientation_innovation)
+                    inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=cfg.gating.orientation_innovation)
                     inns[(a, b)] = inn
                     d2[a, b] = inn.d2_position
             gate = d2 <= self._thr[3]
-            if cfg.association == "jcbb" and len(M) > 1:
-                pairs = associate_jcbb(inns, ekf, len(M), gate, cfg.gate_probability)
+            if cfg.gating.association == "jcbb" and len(M) > 1:
+                pairs = associate_jcbb(inns, ekf, len(M), gate, cfg.gating.gate_probability)
             else:
                 pairs = associate(d2, gate)
             paired = {a for a, _ in pairs}
@@ -125,7 +125,7 @@ class ObjectMapper:
     def _update_landmark(self, t, x, j, R_ahrs, att_cov, det) -> None:
         ekf = self.ekf
         self._ensure_active(j)
-        inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=self.cfg.orientation_innovation)
+        inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=self.cfg.gating.orientation_innovation)
         lm = ekf.landmarks[j]
         common = dict(stamp_s=t, kind="landmark", landmark=j, label=x.label, landmark_label=lm.label,
                       detection=x.index, object_name=det.extras.get("object_name", ""))

@@ -92,14 +92,14 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
     # the launch point: truth + an N(0, initial_position_sigma) fix error where truth exists (drawn so that the
     # initial NEES is chi-square like every later one), the origin otherwise; the first valid DVL velocity
     p0 = dataset.truth.interpolate_position(t0)[0] if dataset.truth is not None else np.zeros(3)
-    dp0 = init_rng.normal(0.0, cfg.initial_position_sigma_m, 3)
-    if dataset.truth is not None and cfg.perturb_initial_position:
+    dp0 = init_rng.normal(0.0, cfg.initialisation.initial_position_sigma_m, 3)
+    if dataset.truth is not None and cfg.initialisation.perturb_initial_position:
         p0 = p0 + dp0
     valid = np.flatnonzero(dataset.dvl.valid)
     v0 = dataset.dvl.velocity_body_mps[valid[0]] if len(valid) else np.zeros(3)
     session = SlamSession(dataset.vehicle, mode=mode, config=cfg, symmetries=symmetries, start_stamp_s=t0,
                           initial_position_ned_m=p0, initial_velocity_body_mps=v0)
-    if cfg.surveyed_objects:
+    if cfg.initialisation.surveyed_objects:
         session.add_surveyed_landmarks(*_surveyed(dataset, cfg, init_rng))
     add = {"attitude": session.add_attitude, "dvl": lambda t, v, ok, r: session.add_dvl(t, v, valid=ok, beam_range_m=r),
            "depth": session.add_depth, "detections": session.add_detections}
@@ -114,15 +114,15 @@ def _surveyed(dataset: Dataset, cfg: SlamConfig, rng: np.random.Generator):
     """The surveyed objects' poses: the dataset's object poses plus an N(0, survey sigma) error (a simulated
     survey; a real survey's poses are given to :meth:`SlamSession.add_surveyed_landmarks` directly)."""
     byname = {o.name: o for o in dataset.objects}
-    missing = [n for n in cfg.surveyed_objects if n not in byname]
+    missing = [n for n in cfg.initialisation.surveyed_objects if n not in byname]
     if missing:
         raise SlamError(f"The 'surveyed_objects' of SlamConfig must name objects of the mission "
                         f"({sorted(byname)}). Got {missing} instead.")
     labels, poses = [], []
-    for name in cfg.surveyed_objects:
+    for name in cfg.initialisation.surveyed_objects:
         o = byname[name]
-        R = kern.so3_exp(rng.normal(0.0, cfg.survey_rotation_sigma_rad, 3)) @ o.T_world_object.rotation
-        p = o.T_world_object.translation_m + rng.normal(0.0, cfg.survey_position_sigma_m, 3)
+        R = kern.so3_exp(rng.normal(0.0, cfg.initialisation.survey_rotation_sigma_rad, 3)) @ o.T_world_object.rotation
+        p = o.T_world_object.translation_m + rng.normal(0.0, cfg.initialisation.survey_position_sigma_m, 3)
         labels.append(o.label)
         poses.append(RigidTransform.from_rotation_translation(R, p))
-    return list(cfg.surveyed_objects), labels, poses
+    return list(cfg.initialisation.surveyed_objects), labels, poses

@@ -98,8 +98,8 @@ class SensorGate:
     in a row the filter, not the sensor, is wrong (an unmodelled acceleration), and the next one is accepted."""
 
     def __init__(self, cfg: SlamConfig) -> None:
-        self.max_rejections = cfg.sensor_gate_max_rejections
-        self.threshold = {d: GateThresholds(cfg.sensor_gate_probability).threshold(d) for d in (1, 3)}
+        self.max_rejections = cfg.gating.sensor_gate_max_rejections
+        self.threshold = {d: GateThresholds(cfg.gating.sensor_gate_probability).threshold(d) for d in (1, 3)}
         self.rejections: dict[str, int] = {}
 
 

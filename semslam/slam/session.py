@@ -58,8 +58,8 @@ class SlamSession:
     start_stamp_s : float, optional
         Start of the run (the first epoch). Default: the stamp of the first message.
     initial_position_ned_m, initial_velocity_body_mps : array-like of shape (3,)
-        The launch point (it defines the world frame; known to ``config.initial_position_sigma_m``) and the
-        initial body velocity (known to ``config.initial_velocity_sigma_mps``).
+        The launch point (it defines the world frame; known to ``config.initialisation.initial_position_sigma_m``)
+        and the initial body velocity (known to ``initial_velocity_sigma_mps``).
     """
 
     def __init__(self, vehicle: VehicleDescription, *, mode: str = "pose", config: SlamConfig | None = None,
@@ -80,8 +80,8 @@ class SlamSession:
         if start_stamp_s is not None and not math.isfinite(float(start_stamp_s)):
             raise SlamError(f"The 'start_stamp_s' argument of SlamSession must be finite. Got {start_stamp_s!r} instead.")
         self._t0 = None if start_stamp_s is None else float(start_stamp_s)
-        self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.propagate_attitude_noise)
-        self.dvl = DvlModel(vehicle, cfg.dvl_use_beam_ranges)
+        self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.motion.propagate_attitude_noise)
+        self.dvl = DvlModel(vehicle, cfg.motion.dvl_use_beam_ranges)
         self.depth = DepthModel(vehicle)
         self.gate = SensorGate(cfg)
         self.log: list[dict] = []
@@ -102,30 +102,31 @@ class SlamSession:
         self._t0 = stamp_s if self._t0 is None else self._t0
         d = vehicle.dvl
         heading = self.mode == "pose+heading"
-        calib = cfg.dvl_calibration and any(v > 0 for v in (d.scale_factor_sigma, d.misalignment_sigma_rad,
+        calib = cfg.motion.dvl_calibration and any(v > 0 for v in (d.scale_factor_sigma, d.misalignment_sigma_rad,
                                                                d.bias_sigma_mps, d.degraded_bias_sigma_mps))
-        var0 = [cfg.initial_position_sigma_m ** 2] * 3 + [cfg.initial_velocity_sigma_mps ** 2] * 3
+        init = cfg.initialisation
+        var0 = [init.initial_position_sigma_m ** 2] * 3 + [init.initial_velocity_sigma_mps ** 2] * 3
         if calib:
             var0 += [max(d.bias_sigma_mps, 1e-6) ** 2] * 3 + [1e-12] * 3 + [max(d.scale_factor_sigma, 1e-6) ** 2,
                                                                           max(d.misalignment_sigma_rad, 1e-6) ** 2]
         if heading:
-            var0 += [cfg.yaw_bias_sigma_rad ** 2]
+            var0 += [cfg.motion.yaw_bias_sigma_rad ** 2]
         ekf = SemanticEkf(self._p0, self._v0, np.diag(var0), yaw_bias=heading, dvl_calibration=calib,
                           dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
                           dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps, dvl_slope_bias_tau_s=d.degraded_bias_tau_s)
-        ekf.constrain_heading_nullspace(heading and cfg.observability_constrained)
-        if cfg.smooth:
-            ekf.recorder = RtsRecorder(n_keep=6, max_bytes=cfg.smoother_max_mb * 1e6)
+        ekf.constrain_heading_nullspace(heading and cfg.motion.observability_constrained)
+        if cfg.output.smooth:
+            ekf.recorder = RtsRecorder(n_keep=6, max_bytes=cfg.output.smoother_max_mb * 1e6)
         self.ekf = ekf
         self.t = self._t0
         self.mapper = ObjectMapper(ekf, cfg, self.mode, self.symmetries, vehicle.T_vehicle_scanner, self._log)
         if self._surveyed:
             names, labels, poses = zip(*self._surveyed)
-            self.mapper.add_surveyed(self._t0, names, labels, poses, cfg.survey_position_sigma_m,
-                                     cfg.survey_rotation_sigma_rad)
+            self.mapper.add_surveyed(self._t0, names, labels, poses, cfg.initialisation.survey_position_sigma_m,
+                                     cfg.initialisation.survey_rotation_sigma_rad)
 
     def add_surveyed_landmarks(self, names, labels, T_world_objects) -> None:
-        """Landmarks known a priori (a surveyed structure), to ``config.survey_position_sigma_m`` and
+        """Landmarks known a priori (a surveyed structure), to ``config.initialisation.survey_position_sigma_m`` and
         ``survey_rotation_sigma_rad``; before the first message only."""
         if self.ekf is not None:
             raise SlamError("SlamSession.add_surveyed_landmarks must be called before the first message.")
@@ -214,7 +215,7 @@ class SlamSession:
             self.attitude.forget_before(self.t)
 
     def _hist_stamp(self, k: int) -> float:
-        return self._t0 + k * (1.0 / self.cfg.history_rate_hz)
+        return self._t0 + k * (1.0 / self.cfg.output.history_rate_hz)
 
     def _history_before(self, t: float, inclusive: bool = False) -> None:
         """Record every history epoch before ``t`` (at or before with ``inclusive``)."""
@@ -231,9 +232,9 @@ class SlamSession:
         cfg, ekf = self.cfg, self.ekf
         degraded = bool(ekf.dvl_calibration and self.dvl.degraded)
         while self.t < t - 1e-12:
-            dt = min(cfg.max_predict_dt_s, t - self.t)
+            dt = min(cfg.motion.max_predict_dt_s, t - self.t)
             rpy, f = self.attitude.at(self.t + dt / 2)
-            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.velocity_rw_mps_per_sqrt_s,
+            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.motion.velocity_rw_mps_per_sqrt_s,
                         attitude_cov_world=self.attitude.cov_world(rpy, f),
                         yaw_bias_rw=self.vehicle.attitude.yaw_bias_walk_rad_per_sqrt_s, dvl_on_slope=degraded)
             self.t += dt
