@@ -32,7 +32,12 @@ from ..recognition import (
     chi2_distances,
     combine_descriptors,
 )
-from ..recognition.plausibility import border_touched, principal_extent, scan_angular_extent
+from ..recognition.plausibility import (
+    border_touched,
+    max_plausible_extent_m,
+    principal_extent,
+    scan_angular_extent,
+)
 from ..registration.pose import PoseConfig, PoseModel, estimate_object_pose, prepare_pose_model
 from ..segmentation.scene import SegmentationConfig, SegmentationResult, segment_scene
 
@@ -266,8 +271,8 @@ class ScanRecognizer:
         cfg = self.config
         if cfg.size_tolerance is None:
             return float("inf")
-        biggest = max(float(self.db.class_info(c).size_xyz_m.max()) for c in self.db.classes)
-        return cfg.size_tolerance * biggest + cfg.size_slack_m
+        return max(max_plausible_extent_m(self.db.class_info(c).size_xyz_m, tolerance=cfg.size_tolerance,
+                                          slack_m=cfg.size_slack_m) for c in self.db.classes)
 
     def warm_up(self) -> None:
         """Prepare every class's pose model now (so that the first scan is not slower than the others)."""
@@ -353,8 +358,8 @@ class ScanRecognizer:
                                                **common))
                 continue
             if cfg.size_tolerance is not None:
-                size = self.db.class_info(label).size_xyz_m
-                limit = cfg.size_tolerance * float(size.max()) + cfg.size_slack_m
+                limit = max_plausible_extent_m(self.db.class_info(label).size_xyz_m, tolerance=cfg.size_tolerance,
+                                               slack_m=cfg.size_slack_m)
                 if extent[0] > limit:
                     outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, match.nearest_label,
                                                    match.distance, match.threshold, None,
@@ -394,11 +399,7 @@ class ScanRecognizer:
                                     viewpoint_xyz_m=scan.viewpoint_xyz_m)
         timings["pose"] += (time.perf_counter() - t0) * 1e3
         cov = pose.covariance_6x6
-        pc = self.config.pose
-        aligned = (pose.fitness >= pc.min_fitness and pose.rmse_m <= pc.max_rmse_m
-                   and not (np.isfinite(pose.visibility) and pose.visibility > pc.max_visibility))
-        ambiguous = (not pose.reliable and aligned and np.isfinite(pose.score_margin)
-                     and pose.score_margin < pc.min_score_margin)
+        ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
         extras["pose_visibility"] = float(pose.visibility)
         extras["pose_score_margin"] = float(pose.score_margin)
         if ambiguous:

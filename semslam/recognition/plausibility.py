@@ -17,7 +17,7 @@ import numpy as np
 from .. import _pipeline_kernels as K
 from .._validation import as_float_array, check_positive
 
-__all__ = ["cluster_extent_m", "scan_angular_extent", "size_plausible", "touches_scan_border"]
+__all__ = ["cluster_extent_m", "max_plausible_extent_m", "scan_angular_extent", "size_plausible", "touches_scan_border"]
 
 
 def cluster_extent_m(points_xyz_m: np.ndarray) -> np.ndarray:
@@ -49,18 +49,22 @@ def principal_extent(pts: np.ndarray) -> np.ndarray:
     return np.sort(K.projected_extent(pts, mean, np.ascontiguousarray(vecs)))[::-1]
 
 
-def size_plausible(extent_m: np.ndarray, class_size_xyz_m: np.ndarray, *, tolerance: float = 1.25,
-                   slack_m: float = 0.01) -> bool:
-    """Whether a cluster of principal extents ``extent_m`` (3,) can be an object of size ``class_size_xyz_m`` (3,).
+def max_plausible_extent_m(class_size_xyz_m, *, tolerance: float = 1.15, slack_m: float = 0.01) -> float:
+    """The largest principal extent (m) a cluster of an object of bounding-box size ``class_size_xyz_m`` may have:
+    ``tolerance * max(size) + slack_m`` (a partial view measured along its principal axes is about as long as the
+    object's longest side; noise, the voxel grid and floor points left under it add a little). The one size rule
+    of the pipeline (``PipelineConfig.size_tolerance``, ``size_slack_m``)."""
+    size = as_float_array("class_size_xyz_m", class_size_xyz_m, (3,), caller="max_plausible_extent_m")
+    tol = check_positive("tolerance", tolerance, caller="max_plausible_extent_m")
+    return tol * float(size.max()) + float(slack_m)
 
-    A partial view is never longer than the object's bounding-box diagonal; noise, the voxel grid and
-    floor points left under the object add a little. The cluster is implausible when its largest extent
-    exceeds ``tolerance * diagonal + slack_m``.
-    """
+
+def size_plausible(extent_m: np.ndarray, class_size_xyz_m: np.ndarray, *, tolerance: float = 1.15,
+                   slack_m: float = 0.01) -> bool:
+    """Whether a cluster of principal extents ``extent_m`` (3,) can be an object of size ``class_size_xyz_m`` (3,):
+    its largest extent is at most :func:`max_plausible_extent_m`."""
     ext = as_float_array("extent_m", extent_m, (3,), caller="size_plausible")
-    size = as_float_array("class_size_xyz_m", class_size_xyz_m, (3,), caller="size_plausible")
-    tol = check_positive("tolerance", tolerance, caller="size_plausible")
-    return bool(ext.max() <= tol * float(np.linalg.norm(size)) + float(slack_m))
+    return bool(ext.max() <= max_plausible_extent_m(class_size_xyz_m, tolerance=tolerance, slack_m=slack_m))
 
 
 def _angles(points_xyz_m: np.ndarray, viewpoint_xyz_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

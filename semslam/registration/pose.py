@@ -236,6 +236,9 @@ class PoseEstimate:
     extras: dict = field(default_factory=dict)
     visibility: float = float("nan")
     score_margin: float = float("nan")
+    #: well aligned (fitness, rmse, visibility) but another, non-equivalent orientation scores within
+    #: ``min_score_margin``: the position is trustworthy, the orientation is not (see :func:`pose_verdict`)
+    ambiguous: bool = False
 
     def to_dict(self) -> dict:
         return {
@@ -244,7 +247,7 @@ class PoseEstimate:
             "rmse_m": float(self.rmse_m), "reliable": bool(self.reliable), "n_points": int(self.n_points),
             "coarse_fitness": float(self.coarse_fitness), "icp_converged": bool(self.icp_converged),
             "residual_sigma_m": float(self.residual_sigma_m), "visibility": float(self.visibility),
-            "score_margin": float(self.score_margin),
+            "score_margin": float(self.score_margin), "ambiguous": bool(self.ambiguous),
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
         }
 
@@ -336,6 +339,21 @@ def _oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray
     return np.vstack(out_p), np.vstack(out_n)
 
 
+def pose_verdict(coarse_ok: bool, fitness: float, rmse_m: float, visibility: float, score_margin: float,
+                 cfg: "PoseConfig") -> tuple[bool, bool]:
+    """``(reliable, ambiguous)``: the one rule for trusting a pose.
+
+    *Aligned*: fitness >= ``min_fitness``, rmse <= ``max_rmse_m`` and (when measured) visibility cost <=
+    ``max_visibility``. *Reliable*: aligned, the coarse search converged and (when the visibility is measured,
+    i.e. the grid search) the score margin >= ``min_score_margin``. *Ambiguous*: aligned but not reliable because
+    another, non-equivalent orientation scores within the margin."""
+    seen = bool(np.isfinite(visibility))
+    aligned = bool(fitness >= cfg.min_fitness and rmse_m <= cfg.max_rmse_m and not (seen and visibility > cfg.max_visibility))
+    reliable = bool(coarse_ok and aligned and (not seen or score_margin >= cfg.min_score_margin))
+    ambiguous = bool(not reliable and aligned and np.isfinite(score_margin) and score_margin < cfg.min_score_margin)
+    return reliable, ambiguous
+
+
 def estimate_object_pose(
     cluster_points_scanner: Any,
     model_points_object: Any,
@@ -418,13 +436,12 @@ def estimate_object_pose(
     T_so_can = cov[1]
     cov = cov[0]
     t4 = time.perf_counter()
-    reliable = bool(coarse_ok and fine.fitness >= cfg.min_fitness and fine.inlier_rmse_m <= cfg.max_rmse_m)
-    if np.isfinite(vis):
-        reliable = reliable and vis <= cfg.max_visibility and margin >= cfg.min_score_margin
+    reliable, ambiguous = pose_verdict(coarse_ok, fine.fitness, fine.inlier_rmse_m, vis, margin, cfg)
     return PoseEstimate(
         T_scanner_object=RigidTransform(T_so_can), covariance_6x6=cov, fitness=fine.fitness,
         rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=coarse_fitness,
         icp_converged=fine.converged, residual_sigma_m=float(np.sqrt(sigma2)), visibility=vis, score_margin=margin,
+        ambiguous=ambiguous,
         timings_ms={"coarse": 1e3 * (t2 - t1), "icp": 1e3 * (t3 - t2), "covariance": 1e3 * (t4 - t3),
                     "total": 1e3 * (t4 - t0)},
         extras=extras,
