@@ -159,11 +159,77 @@ def test_chunked_draws_equal_one_chunk(n_points):
                                       _esf_in_one_chunk(pts, seed, 2000))
 
 
-def test_pcl_float32_accumulation_is_exact():
-    """The integer A3 / ratio / D2 / D3 counts equal PCL's float32 sums: the largest A3 bin sum (in 1/32)
-    stays far below 2^24, where float32 would start rounding."""
-    assert 20000 * 3 * 65 < 2**24
-    x = np.float32(0)
-    for k in np.random.default_rng(0).integers(1, 66, size=20000):  # PCL's order: one float32 add per sample
-        x = np.float32(x + np.float32(k) / np.float32(32))
-    assert x * 32 == float(np.sum(np.random.default_rng(0).integers(1, 66, size=20000)))
+def _pcl_float32_histogram(out_i, out_f, end):
+    """PCL 1.13's accumulation, transcribed independently of ``esf_histogram``: every accepted triple adds, in
+    draw order and in float32, ``count / 32`` to its A3 bins and 1 to its D2, ratio and D3 bins (``np.add.at``
+    is unbuffered and sequential, hence PCL's order); then D2-in and the ratio block are halved, the blocks
+    weighted, and the histogram divided by its float32 running sum."""
+    f32 = np.float32
+    ok = out_i[:end, 0] != 0
+    oi, of = out_i[:end][ok].astype(np.int64), out_f[:end][ok]
+    n = len(oi)
+    maxd2 = max(f32(0), of[:, 0:3].max())
+    maxd3 = max(f32(0), of[:, 6].max())
+    h = np.zeros(640, dtype=np.float32)
+    cls = oi[:, 7]
+    # A3: (th1, n3), (th2, n1), (th3, n2) per triple, interleaved in PCL's order
+    a3_bins = np.stack([cls * 64 + oi[:, 1], cls * 64 + oi[:, 2], cls * 64 + oi[:, 3]], axis=1).ravel()
+    a3_vals = (np.stack([oi[:, 10], oi[:, 8], oi[:, 9]], axis=1).astype(np.float32) / f32(32)).ravel()
+    np.add.at(h, a3_bins, a3_vals)
+    for j in range(3):
+        line = oi[:, 4 + j]
+        mixed = line == 2
+        np.add.at(h, 9 * 64 + np.floor(of[mixed, 3 + j] * f32(63) + f32(0.5)).astype(np.int64), f32(1))
+        np.add.at(h, (6 + line) * 64 + np.floor(of[:, j] / maxd2 * f32(63) + f32(0.5)).astype(np.int64), f32(1))
+    idx = np.floor(of[:, 6] / maxd3 * f32(63) + f32(0.5)).astype(np.int64)
+    w = of[:, 7]
+    d3 = np.where(w >= f32(0.999), 0, np.where(w <= f32(0.001), 1, 2))
+    keep = (idx >= 0) & (idx < 64)
+    np.add.at(h, (3 + d3[keep]) * 64 + idx[keep], f32(1))
+    h[6 * 64:7 * 64] *= f32(0.5)
+    h[9 * 64:] *= f32(0.5)
+    h *= np.repeat(np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 2.0, 2.0, 2.0], dtype=np.float32), 64)
+    total = np.cumsum(h, dtype=np.float32)[-1]  # sequential float32 sum, as PCL's loop
+    return h / total, n
+
+
+@pytest.mark.parametrize("cloud,seed", [("bun0", 12345), ("milk", 3)])
+def test_pcl_float32_accumulation_is_exact(test_data, cloud, seed):
+    """The integer A3 / ratio / D2 / D3 counts of ``compute_esf`` equal PCL's float32 sums: PCL's own
+    draw-order float32 accumulation (transcribed above, on the triples semslam evaluates) gives compute_esf's
+    histogram bit for bit at the default 20,000 samples, every A3 bin's float32 sum times 32 is its exact
+    integer count, and the largest stays below 2^24. Catches a broken ``esf_histogram`` (a wrong divisor or
+    halving, an overflowing or float accumulator, a block out of place) that the golden files would only
+    show for their few clouds."""
+    from semslam.descriptors import _esf_kernels as K
+
+    if cloud == "bun0":
+        pts = np.load(test_data / "descriptors" / "bun0.npy")[:, :3]
+    else:
+        pts = np.load(test_data / "descriptors" / "milk.npz")["points"]
+    n_samples = 20000
+    local, vox, lut, _ = K.esf_prepare(np.ascontiguousarray(pts, dtype=np.float32))
+    m = 2 * n_samples
+    triples = (glibc_rand(seed, 3 * m) % len(pts)).reshape(m, 3)
+    out_i = np.empty((m, 11), dtype=np.int64)
+    out_f = np.empty((m, 8), dtype=np.float32)
+    K.esf_evaluate(local, vox, lut, triples, out_i, out_f)
+    accepted = np.flatnonzero(out_i[:, 0])
+    assert len(accepted) >= n_samples
+    end = int(accepted[n_samples - 1]) + 1
+    ours = compute_esf(pts, seed=seed, sampler="pcl")
+    ref, n = _pcl_float32_histogram(out_i, out_f, end)
+    assert n == n_samples
+    np.testing.assert_array_equal(ours, ref)
+    # A3: float32 partial sums in draw order are exact multiples of 1/32 (checked against int64 counts)
+    ok = out_i[:end, 0] != 0
+    oi = out_i[:end][ok]
+    cls = oi[:, 7]
+    counts = np.zeros(192, dtype=np.int64)
+    for th, cnt in ((1, 10), (2, 8), (3, 9)):
+        np.add.at(counts, cls * 64 + oi[:, th], oi[:, cnt])
+    f32sum = np.zeros(192, dtype=np.float32)
+    bins = np.stack([cls * 64 + oi[:, 1], cls * 64 + oi[:, 2], cls * 64 + oi[:, 3]], axis=1).ravel()
+    np.add.at(f32sum, bins, (np.stack([oi[:, 10], oi[:, 8], oi[:, 9]], axis=1).astype(np.float32) / 32).ravel())
+    np.testing.assert_array_equal(f32sum.astype(np.float64) * 32, counts)
+    assert 0 < counts.max() < 2**24 and counts.sum() > 2**15  # a real load, beyond int16

@@ -86,19 +86,21 @@ def _orthonormal(vectors) -> np.ndarray:
 
 def align_rotation(R: np.ndarray, R_ref: np.ndarray, symmetry: Symmetry, axes_world: np.ndarray) -> np.ndarray:
     """The orientation equivalent to ``R`` (under ``symmetry`` and free rotations about ``axes_world``)
-    closest to ``R_ref``."""
+    closest to ``R_ref``: the joint optimum over the group elements and the free angle (each element is aligned
+    about the free axis first, then the closest is kept)."""
+    cands = [R]
     if symmetry.kind == "discrete":
-        best, best_tr = R, -np.inf
-        for k in range(symmetry.order):
-            Rk = R @ kern.axis_rotation(symmetry.axis_object, 2.0 * np.pi * k / symmetry.order)
-            tr = np.trace(Rk @ R_ref.T)
-            if tr > best_tr:
-                best, best_tr = Rk, tr
-        R = best
+        cands = [R @ kern.axis_rotation(symmetry.axis_object, 2.0 * np.pi * k / symmetry.order)
+                 for k in range(symmetry.order)]
     if len(axes_world) == 1:
         u = axes_world[0]
-        R = kern.axis_rotation(u, kern.best_angle_about_axis(R @ R_ref.T, u)) @ R
-    return R
+        cands = [kern.axis_rotation(u, kern.best_angle_about_axis(Rk @ R_ref.T, u)) @ Rk for Rk in cands]
+    best, best_tr = cands[0], -np.inf
+    for Rk in cands:
+        tr = np.trace(Rk @ R_ref.T)
+        if tr > best_tr:
+            best, best_tr = Rk, tr
+    return best
 
 
 @dataclass(frozen=True, eq=False)
