@@ -219,3 +219,25 @@ def test_estimators_follow_sklearn_api():
         assert est.fit(X, y) is est
         assert est.score(X, y) == 1.0  # ClassifierMixin.score = accuracy
         assert not hasattr(twin, "classes_")  # clone is independent
+
+
+def test_algorithm_is_a_speed_switch_only():
+    import pickle
+
+    from sklearn.base import clone
+
+    rng = np.random.default_rng(8)
+    X, y = blobs(rng, n_per_class=60, d=50)
+    Q = X[::7] + 0.02 * rng.gamma(1.0, size=X[::7].shape)
+    auto = Chi2NearestNeighbor(n_neighbors=3, rejection="global").fit(X, y)
+    assert auto.get_params()["algorithm"] == "auto"
+    auto.kneighbors(X[:40])  # 180 views, 40 queries: "auto" builds the index
+    assert auto.index_ is not None
+    brute = clone(auto).set_params(algorithm="brute").fit(X, y)
+    brute.kneighbors(X[:40])
+    assert brute.index_ is None
+    for a, b in zip(auto.kneighbors(Q), brute.kneighbors(Q)):
+        np.testing.assert_array_equal(a, b)  # bit for bit
+    np.testing.assert_array_equal(auto.predict_with_distance(Q)[1], brute.predict_with_distance(Q)[1])
+    again = pickle.loads(pickle.dumps(auto))
+    np.testing.assert_array_equal(again.kneighbors(Q)[1], brute.kneighbors(Q)[1])

@@ -6,7 +6,7 @@ import numpy as np
 
 from .._validation import as_float_array, check_choice
 from ..errors import DescriptorError
-from ._vfh_kernels import vfh_angles
+from ._pair_kernels import vfh_f32
 
 VFH_SIZE = 308
 VFH_VARIANTS = ("pcl-1.13", "pcl-1.8", "rusu2010")
@@ -25,10 +25,16 @@ def compute_vfh(
     """VFH global descriptor of a cluster with normals, as PCL's ``VFHEstimation`` (defaults as PCL's).
 
     Layout: [f1 0-44 | f2 45-89 | f3 90-134 | f4 135-179 | viewpoint 180-307]. f1..f3 are the pair
-    features (see :func:`~semslam.descriptors._pair_kernels.pair_features`) of the centroid with the
+    features (see :func:`~semslam.descriptors._pair_kernels.pair_features_f32`) of the centroid with the
     mean normal (not re-normalised) against every point with its normal; each adds 100/(N-1). The
     viewpoint part bins (n . d + 1)/2 of every normal n into 128 bins, each adding 100/N, where d is
     the direction from the centroid to the viewpoint.
+
+    Every step runs in PCL's precision: points, normals, centroid, mean normal, the pair features
+    (``acosf``, ``atan2f``, Eigen's summation order) and the histogram are float32, the bin indices
+    double from the float features, so a feature on a bin edge falls in PCL's bin and the output is
+    PCL 1.13's bit for bit (:func:`~semslam.descriptors._pair_kernels.vfh_f32`). Inputs are rounded to
+    float32 first, as PCL stores them.
 
     Parameters
     ----------
@@ -50,14 +56,15 @@ def compute_vfh(
         Scale the increments to 100/(N-1) and 100/N (PCL default True); else each point adds 1.
     normalize_distances : bool
         With ``size_component``, bin f4 = |p - c| as floor(45 f4 / dmax) (dmax = largest distance
-        from c; PCL variants take sqrt(dmax^2 + 1) because of its 4-vector w); else round(100 f4).
+        from c over every point; PCL variants take sqrt(dmax^2 + 1) because of its 4-vector w); else
+        round(100 f4).
     size_component : bool
         Fill the f4 block (PCL default False: bins 135-179 stay zero).
 
     Returns
     -------
     ndarray of shape (308,), float64
-        Never NaN.
+        The float32 histogram, widened. Never NaN.
 
     Raises
     ------
@@ -78,31 +85,17 @@ def compute_vfh(
         raise DescriptorError(
             f"The 'normals_xyz' argument of {caller} must have at least 2 finite normals. Got {n} instead."
         )
-    centroid = pts.mean(axis=0)
-    pts, nrm = np.ascontiguousarray(pts[valid]), np.ascontiguousarray(nrm[valid])
-    mean_normal = nrm.mean(axis=0)
-    pcl = variant != "rusu2010"
-
-    size_mode, dist_norm = 0, 1.0
-    if size_component:
-        size_mode = 2 if normalize_distances else 1
-        if normalize_distances:
-            dmax2 = float(((pts - centroid) ** 2).sum(axis=1).max())
-            dist_norm = np.sqrt(dmax2 + 1.0) if pcl else np.sqrt(dmax2)
-            if dist_norm == 0:
-                raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points.")
-    hist = np.zeros(VFH_SIZE)
-    incr = 100.0 / (n - 1) if normalize_bins else 1.0
-    vfh_angles(centroid, mean_normal, pts, nrm, variant != "pcl-1.13", incr, size_mode, dist_norm, hist)
-
-    # Viewpoint component. PCL: (vp, 0) - (c, 1) normalised as a 4-vector (w = -1).
-    d = vp - centroid
-    norm = np.sqrt(d @ d + 1.0) if pcl else np.sqrt(d @ d)
-    if norm == 0:
+    # PCL works in float32 (points, normals, features, histogram): so do we, step for step, so that a feature
+    # on a bin edge falls in PCL's bin (see vfh_f32). The float32 result is returned as float64.
+    hist = np.zeros(VFH_SIZE, dtype=np.float32)
+    size_mode = (2 if normalize_distances else 1) if size_component else 0
+    status = vfh_f32(np.ascontiguousarray(pts, dtype=np.float32), np.ascontiguousarray(nrm, dtype=np.float32),
+                     valid, np.ascontiguousarray(vp, dtype=np.float32), variant != "pcl-1.13",
+                     variant != "rusu2010", bool(normalize_bins), size_mode, hist)
+    if status == 1:
+        raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points.")
+    if status == 2:
         raise DescriptorError(
             f"The 'viewpoint_xyz_m' argument of {caller} must differ from the cluster's centroid. Got {vp.tolist()}."
         )
-    alpha = (nrm @ (d / norm) + 1.0) * 0.5
-    bins = np.clip(np.floor(alpha * 128).astype(np.int64), 0, 127)
-    hist[180:] = np.bincount(bins, minlength=128) * (100.0 / n if normalize_bins else 1.0)
-    return hist
+    return hist.astype(np.float64)

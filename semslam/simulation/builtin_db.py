@@ -62,7 +62,8 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
     params = {"format_version": FORMAT_VERSION, "semslam": __version__, "kinect": SURVEY_KINECT.to_dict(),
               "model_kinect": POSE_MODEL_KINECT.to_dict(), "n_model_views": int(n_model_views),
               "n_views": int(n_views), "seed": int(seed), "normal_radius_m": DEFAULT_NORMAL_RADIUS_M,
-              "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None, **kwargs}
+              "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None,
+              "vfh_arithmetic": "float32 as PCL 1.13", **kwargs}  # a change of the descriptors renews the cache
     key = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
     path = cache_dir() / f"builtin_db_{key}.npz"
     if cache and path.is_file():
