@@ -3,13 +3,9 @@
 
 from __future__ import annotations
 
-import json
-import tomllib
 from pathlib import Path
 
 from ..errors import ConfigError, InputError
-
-_MAX_CONFIG_BYTES = 1 << 20
 
 
 def load_dataset(spec: str, vehicle: str | None = None):
@@ -40,18 +36,7 @@ def load_dataset(spec: str, vehicle: str | None = None):
 
 
 def read_config_file(path: str, option: str = "--config") -> dict:
-    """The table in a TOML (``.toml``) or JSON file, for a command's ``--config``."""
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"The {option} file {path!r} does not exist or is not a regular file.")
-    if p.stat().st_size > _MAX_CONFIG_BYTES:
-        raise ConfigError(f"The {option} file {path!r} must be at most {_MAX_CONFIG_BYTES} bytes.")
-    try:
-        text = p.read_text(encoding="utf-8")
-        d = tomllib.loads(text) if p.suffix.lower() == ".toml" else json.loads(text)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
-        kind = "TOML" if p.suffix.lower() == ".toml" else "JSON"
-        raise ConfigError(f"The {option} file {path!r} cannot be read as {kind}: {exc}") from None
-    if not isinstance(d, dict):
-        raise ConfigError(f"The {option} file {path!r} must hold a table of settings. Got {type(d).__name__} instead.")
-    return d
+    """The table in a TOML (``.toml``) or JSON (``.json``) file, for a command's ``--config``."""
+    from .._tables import read_table
+
+    return read_table(path, f"{option} file", ConfigError)

@@ -25,13 +25,13 @@ dropout.
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
+from .._tables import read_table
 from ..errors import BagError, DatasetError
 from .vehicle import VehicleDescription
 
@@ -92,14 +92,8 @@ class TopicMap:
 
 
 def read_topic_map(path: str | os.PathLike) -> TopicMap:
-    p = Path(path)
-    if not p.is_file():
-        raise DatasetError(f"The topic map {str(p)!r} does not exist or is not a regular file.")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise DatasetError(f"The topic map {str(p)!r} is not valid TOML: {exc}") from None
-    return TopicMap.from_dict(d, source=f"topic map {str(p)!r}")
+    d = read_table(path, "topic map", DatasetError)
+    return TopicMap.from_dict(d, source=f"topic map {str(Path(path))!r}")
 
 
 def suggest_topic_map(bag) -> TopicMap:

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -38,11 +37,11 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_write_text
+from .._tables import read_table
 from ..errors import DatasetError, SemslamError
 from ..geometry import RigidTransform
 
 VEHICLE_FORMAT_VERSION = 1
-_MAX_FILE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -249,16 +248,8 @@ def _transform(raw: dict, nested: Any, sec: str, tkey: str, source: str) -> Rigi
 
 def read_vehicle_toml(path: str | os.PathLike) -> VehicleDescription:
     """Read and validate a vehicle file (see the module docstring)."""
-    p = Path(path)
-    if not p.is_file():
-        raise DatasetError(f"The vehicle file {str(p)!r} does not exist or is not a regular file.")
-    if p.stat().st_size > _MAX_FILE_BYTES:
-        raise DatasetError(f"The vehicle file {str(p)!r} must be at most {_MAX_FILE_BYTES} bytes. Got {p.stat().st_size}.")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise DatasetError(f"The vehicle file {str(p)!r} is not valid TOML: {exc}") from None
-    return VehicleDescription.from_dict(d, source=f"vehicle file {str(p)!r}")
+    d = read_table(path, "vehicle file", DatasetError)
+    return VehicleDescription.from_dict(d, source=f"vehicle file {str(Path(path))!r}")
 
 
 def write_vehicle_toml(vehicle: VehicleDescription, path: str | os.PathLike) -> Path:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import RigidTransform, rpy_from_rotation, wrap_angle
+from ..geometry import rpy_from_rotation, wrap_angle
 from ..symmetry import Symmetry
 
 

@@ -8,8 +8,8 @@ from .scan import (
     PipelineConfig,
     RecognitionResult,
     ScanRecognizer,
-    _input_indices,
-    _scan_angular_extent,
+    _input_indices,  # noqa: F401  (kernel oracles in tests)
+    _scan_angular_extent,  # noqa: F401
     recognize_scan,
 )
 
