@@ -122,6 +122,8 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
                  "--topics", f"{bag}.topics.toml", "--mode", "pose", "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
     assert (run / "report.html").is_file() and (run / "slam" / "pose" / "trajectory.csv").is_file()
+    for name in ("trajectory.tum", "trajectory.kitti", "map.json", "map.ply", "run.mcap"):
+        assert (run / "slam" / "pose" / name).is_file(), name
     assert "ate_rmse_m" not in payload["slam"]["pose"]  # no ground truth in a bag: no error metrics
     assert main(["run", str(bag), "--db", "builtin", "--out", str(run)]) == 1
     assert "new or empty directory" in capsys.readouterr().err

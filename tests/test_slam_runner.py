@@ -120,9 +120,10 @@ def test_detections_jsonl_round_trip_gives_the_same_run(tmp_path, mission):
 
 def test_cli_slam_end_to_end(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["slam", "synthetic:2", "--mode", "pose", "--out", str(out), "--json"]) == 0
+    assert main(["slam", "synthetic:2", "--mode", "pose", "--out", str(out), "--json", "--export"]) == 0
     payload = json.loads(capsys.readouterr().out)
-    for name in ("trajectory.csv", "landmarks.csv", "updates.csv", "metrics.json", "config.json"):
+    for name in ("trajectory.csv", "landmarks.csv", "updates.csv", "metrics.json", "config.json", "trajectory.tum",
+                 "trajectory_smoothed.tum", "trajectory.kitti", "map.json", "map.csv", "map.ply", "run.mcap"):
         assert (out / name).is_file()
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["ate_rmse_m"] == pytest.approx(payload["metrics"]["pose"]["ate_rmse_m"])

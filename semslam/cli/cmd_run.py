@@ -1,5 +1,6 @@
 """``semslam run BAG|MISSION --db DB --out RUN``: the whole chain on a recorded dive: (a bag converted to
-RUN/mission,) every scan recognised (RUN/detections.jsonl), SLAM in every mode (RUN/slam/<mode>/), the report."""
+RUN/mission,) every scan recognised (RUN/detections.jsonl), SLAM in every mode (RUN/slam/<mode>/, with the
+trajectories as TUM and KITTI, the map as JSON/CSV/PLY and run.mcap for Foxglove/RViz), the report."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import ScanRecognizer, detect_mission
     from ..recognition import load_database
     from ..slam import MODES, SlamConfig, run_slam, write_detections_jsonl, write_run
+    from ..slam.export import export_run
     from ..slam.rundir import DETECTIONS, mode_dir
     from ._output import emit
 
@@ -69,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
         res = run_slam(dataset, found.detections_by_scan, mode=mode, config=SlamConfig(), seed=args.seed,
                        symmetries=db.symmetries())
         write_run(res, mode_dir(out, mode))
+        origin = (dataset.metadata.get("source") or {}).get("time_origin_ns", 0)
+        export_run(res, mode_dir(out, mode), detections_by_scan=found.detections_by_scan or None,
+                   T_vehicle_scanner=dataset.T_vehicle_scanner if found.detections_by_scan else None,
+                   time_origin_ns=int(origin or 0))
         metrics[mode] = res.metrics
     report = None
     if not args.no_report:

@@ -23,6 +23,8 @@ def register(subparsers, common) -> None:
                                     "a run's config.json repeats it exactly")
     p.add_argument("--vehicle", help="vehicle description (TOML) replacing the dataset's; 'girona500' for the defaults")
     p.add_argument("--db", help="view database whose class symmetries the map uses (default: the built-in objects')")
+    p.add_argument("--export", action="store_true",
+                   help="also write TUM and KITTI trajectories, the map as JSON/CSV/PLY and run.mcap (ROS 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the truth-based detections (default 0)")
     p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
                    help="name of a mission object whose pose is known a priori (surveyed reference structure); repeatable")
@@ -89,6 +91,11 @@ def run(args: argparse.Namespace) -> int:
         else:
             res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries)
         write_run(res, mode_dir(out, mode) if len(modes) > 1 else out)
+        if args.export:
+            from ..slam.export import export_run
+
+            export_run(res, mode_dir(out, mode) if len(modes) > 1 else out, detections_by_scan=dets or None,
+                       T_vehicle_scanner=mission.T_vehicle_scanner if dets else None)
         payload[mode] = res.metrics
 
     def text() -> str:
