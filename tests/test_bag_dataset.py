@@ -43,9 +43,16 @@ def _bag_name(tmp_path, fmt):
 
 
 def test_every_bag_format_round_trips_the_logs_and_scans(mission, tmp_path):
+    """Logs, scans and point stamps come back; the scanner's mounting comes from the bag's /tf_static (the
+    vehicle file given here has none: identity), converted from the ROS FLU body to FRD."""
+    from semslam.geometry import RigidTransform
+
+    no_mount = mission.vehicle.replace(scanner=replace(mission.vehicle.scanner, T_vehicle_scanner=RigidTransform.identity()))
     for fmt in FORMATS:
         bag = write_bag(mission, _bag_name(tmp_path, fmt), fmt)
-        back = read_mission(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=mission.vehicle))
+        back = read_mission(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=no_mount))
+        np.testing.assert_allclose(back.T_vehicle_scanner.matrix, mission.T_vehicle_scanner.matrix, atol=1e-12)
+        assert back.metadata["source"]["T_vehicle_scanner_from"] == "/tf_static"
         np.testing.assert_allclose(back.attitude.stamp_s, mission.attitude.stamp_s, rtol=0, atol=1e-9)
         np.testing.assert_allclose(back.attitude.rpy_rad, mission.attitude.rpy_rad, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(back.dvl.valid, mission.dvl.valid)
@@ -115,7 +122,8 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
     assert bag.is_file() and (tmp_path / "dive.bag.vehicle.toml").is_file()
     assert main(["bag", "info", str(bag), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert {t["topic"] for t in info["topics"]} == {"/semslam/scans", "/semslam/imu", "/semslam/dvl", "/semslam/pressure"}
+    assert {t["topic"] for t in info["topics"]} == {"/semslam/scans", "/semslam/imu", "/semslam/dvl", "/semslam/pressure",
+                                                    "/tf_static"}
     assert 'attitude = "/semslam/imu"' in info["suggested_topic_map"]
     run = tmp_path / "run"
     assert main(["run", str(bag), "--db", "builtin", "--out", str(run), "--vehicle", f"{bag}.vehicle.toml",

@@ -13,6 +13,7 @@ Topic map (TOML; ``semslam bag info BAG`` prints a suggestion)::
                                      # geometry_msgs/PoseWithCovarianceStamped (z)
 
     [frames]
+    vehicle_frame_id = "base_link"   # the vehicle in /tf_static: T_vehicle_scanner is read from it when present
     attitude = "enu"                 # "enu": REP-103 (ENU world, FLU body); "ned": NED world, FRD body (COLA2)
     dvl = "flu"                      # "flu" (REP-103 body) or "frd"
     depth = "enu"                    # for pose/odometry depth topics: "enu" (depth = -z) or "ned" (depth = z)
@@ -55,6 +56,8 @@ class TopicMap:
     attitude_frame: str = "enu"
     dvl_frame: str = "flu"
     depth_frame: str = "enu"
+    #: the vehicle's frame in the bag's /tf_static tree (its axes: FLU, or FRD when ``attitude_frame`` is "ned")
+    vehicle_frame_id: str = "base_link"
 
     def __post_init__(self) -> None:
         for name, allowed in (("attitude_frame", ("enu", "ned")), ("dvl_frame", ("flu", "frd")),
@@ -72,6 +75,7 @@ class TopicMap:
         d = asdict(self)
         lines = ["[topics]"] + [f'{k} = "{d[k]}"' for k in ("scans", "attitude", "dvl", "depth") if d[k]]
         lines += ["", "[frames]"] + [f'{k} = "{d[k + "_frame"]}"' for k in ("attitude", "dvl", "depth")]
+        lines.append(f'vehicle_frame_id = "{self.vehicle_frame_id}"')
         return "\n".join(lines) + "\n"
 
     @classmethod
@@ -83,12 +87,12 @@ class TopicMap:
         if not isinstance(topics, dict) or not isinstance(frames, dict):
             raise DatasetError(f"The {source}'s [topics] and [frames] must be tables.")
         known = {"scans", "attitude", "dvl", "depth"}
-        for table, keys in (("topics", known), ("frames", known - {"scans"})):
+        for table, keys in (("topics", known), ("frames", (known - {"scans"}) | {"vehicle_frame_id"})):
             extra = sorted(set(d.get(table, {})) - keys)
             if extra:
                 raise DatasetError(f"The {source} has unknown key(s) {[f'{table}.{k}' for k in extra]}. Expected "
                                    f"some of {sorted(f'{table}.{k}' for k in keys)}.")
-        return cls(**topics, **{f"{k}_frame": v for k, v in frames.items()})
+        return cls(**topics, **{k if k == "vehicle_frame_id" else f"{k}_frame": v for k, v in frames.items()})
 
 
 def read_topic_map(path: str | os.PathLike) -> TopicMap:
@@ -210,6 +214,45 @@ def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
             yield t, "scan", decode_pointcloud2(m.msg, source=f"topic {m.topic}")
 
 
+def static_extrinsic(bag, parent_frame: str, child_frame: str):
+    """``T_parent_child`` from the bag's ``/tf_static`` (a chain of static transforms up from ``child_frame``),
+    None when the bag has no such chain. Axes as the tree gives them (ROS: FLU bodies)."""
+    from ..geometry import RigidTransform
+
+    if not any(r.topic == "/tf_static" for r in bag.topics()):
+        return None
+    up: dict[str, tuple[str, RigidTransform]] = {}
+    for m in bag.messages(["/tf_static"]):
+        for tf in getattr(m.msg, "transforms", []):
+            q, t = tf.transform.rotation, tf.transform.translation
+            T = RigidTransform.from_quat_wxyz([q.w, q.x, q.y, q.z], [t.x, t.y, t.z])
+            up[tf.child_frame_id.lstrip("/")] = (tf.header.frame_id.lstrip("/"), T)
+    T, frame, seen = RigidTransform.identity(), child_frame.lstrip("/"), set()
+    while frame != parent_frame.lstrip("/"):
+        if frame not in up or frame in seen:
+            return None
+        seen.add(frame)
+        parent, T_pf = up[frame]
+        T, frame = T_pf @ T, parent
+    return T
+
+
+def _vehicle_with_tf(bag, tmap: TopicMap, vehicle: VehicleDescription, scan_frame: str):
+    """``vehicle`` with ``T_vehicle_scanner`` from /tf_static when the bag has it (FLU vehicle axes converted to
+    FRD unless the map says the bag is NED/FRD)."""
+    from dataclasses import replace as dc_replace
+
+    from ..geometry import RigidTransform
+    from ..io.ros import C_FRD_FLU
+
+    T = static_extrinsic(bag, tmap.vehicle_frame_id, scan_frame) if scan_frame else None
+    if T is None:
+        return vehicle, "vehicle file"
+    if tmap.attitude_frame == "enu":
+        T = RigidTransform.from_rotation_translation(C_FRD_FLU, (0.0, 0.0, 0.0)) @ T
+    return vehicle.replace(scanner=dc_replace(vehicle.scanner, T_vehicle_scanner=T)), "/tf_static"
+
+
 def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic_map: TopicMap | None = None,
                vehicle: VehicleDescription | None = None, msg_dirs=(), overwrite: bool = False,
                progress: bool = False) -> Path:
@@ -241,12 +284,15 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
                 total = sum(r.count for r in bag.topics() if r.topic in (tmap.scans, tmap.attitude, tmap.dvl, tmap.depth))
                 bar = tqdm(total=total, desc="bag", unit="msg", leave=False)
             origin: list = [0]
+            extrinsics = None
             for t, kind, payload in stream_bag(bag, tmap, vehicle, origin):
                 if bar is not None:
                     bar.update(1)
                 if kind != "scan":
                     logs[kind].append((t, payload))
                     continue
+                if extrinsics is None:
+                    vehicle, extrinsics = _vehicle_with_tf(bag, tmap, vehicle, payload.frame_id)
                 if payload.points_xyz_m.shape[0] == 0:
                     continue
                 offs = payload.time_offset_s if payload.time_offset_s is not None else np.zeros(len(payload.points_xyz_m))
@@ -273,7 +319,8 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
                      AttitudeLog([r[0] for r in att], np.array([r[1] for r in att]).reshape(-1, 3)),
                      DepthLog([r[0] for r in dep], [r[1] for r in dep]),
                      scans=sorted(records, key=lambda r: r.start_stamp_s), directory=scratch,
-                     metadata={"source": {"bag": str(bag_path), "topics": asdict(tmap), "time_origin_ns": origin[0]}})
+                     metadata={"source": {"bag": str(bag_path), "topics": asdict(tmap), "time_origin_ns": origin[0],
+                                          "T_vehicle_scanner_from": extrinsics or "vehicle file"}})
         if not len(ds.attitude):
             raise BagError(f"Bag {str(bag_path)!r}: the attitude topic {tmap.attitude!r} has no usable message.")
         return write_mission(ds, out, overwrite=overwrite)

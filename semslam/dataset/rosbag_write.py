@@ -81,6 +81,19 @@ def _messages(ds: Dataset, store, T):
         msg = encode_pointcloud2(cloud.points_xyz_m, intensity=cloud.intensity, time_offset_s=offs, time_field="t",
                                  time_encoding="float64_s", frame_id="scanner", stamp_ns=start_ns, typestore=store)
         out.append((start_ns, 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg))
+    # the scanner's mounting as a vehicle's URDF publishes it: base_link (FLU) -> scanner, once, on /tf_static
+    from ..geometry import RigidTransform, quat_wxyz_from_rotation
+    from ..io.ros import C_FRD_FLU
+
+    T_flu = RigidTransform.from_rotation_translation(C_FRD_FLU.T, (0.0, 0.0, 0.0)) @ ds.vehicle.T_vehicle_scanner
+    w, x, y, z = (float(v) for v in quat_wxyz_from_rotation(T_flu.rotation))
+    t0 = _ns(min([float(ds.attitude.stamp_s[0])] if len(ds.attitude) else [0.0]))
+    tr = T_flu.translation_m
+    tf = T["geometry_msgs/msg/TransformStamped"](
+        header=ros_header(store, t0, "base_link"), child_frame_id="scanner",
+        transform=T["geometry_msgs/msg/Transform"](translation=vec(tr),
+                                                   rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
+    out.append((t0, -1, "/tf_static", "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](transforms=[tf])))
     out.sort(key=lambda m: (m[0], m[1]))
     return [(ns, topic, mt, msg) for ns, _, topic, mt, msg in out]
 
@@ -99,6 +112,8 @@ def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap",
     ros1 = fmt == "ros1"
     store = default_typestore(ros1=ros1)
     store.register(get_types_from_msg(DVL_MSG, DVL_TYPE))
+    if "tf2_msgs/msg/TFMessage" not in store.types:  # rosbags' ROS 1 Noetic store lacks it
+        store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     msgs = _messages(dataset, store, store.types)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
