@@ -298,3 +298,16 @@ def test_girona500_defaults_are_the_simulated_sensors_figures():
     default = VehicleDescription.girona500().to_dict()
     for section in ("dvl", "attitude", "depth"):
         assert sim[section] == default[section], section
+
+
+def test_mission_log_errors_name_the_file(sim_mission, tmp_path):
+    d = write_mission(sim_mission, tmp_path / "m")
+    rows = (d / "ahrs.csv").read_text().splitlines()
+    rows[3], rows[4] = rows[4], rows[3]  # two stamps out of order
+    (d / "ahrs.csv").write_text("\n".join(rows) + "\n")
+    with pytest.raises(DatasetError, match=r"ahrs.csv.*must be sorted.*row 3"):
+        read_mission(d)
+    rows[3] = "nan" + rows[3][rows[3].index(","):]
+    (d / "ahrs.csv").write_text("\n".join(rows) + "\n")
+    with pytest.raises(DatasetError, match=r"ahrs.csv.*finite stamps"):
+        read_mission(d)

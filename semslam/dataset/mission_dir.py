@@ -208,18 +208,19 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
     try:
         vehicle = _read_vehicle(d, meta, meta_path)
         dv = _floats(d / "dvl.csv", _DVL, extra_prefix="range_")
-        dvl = DvlLog(dv[:, 0], dv[:, 1:4], _valid(dv[:, 4], d / "dvl.csv"), dv[:, 5:] if dv.shape[1] > 5 else None)
+        dvl = _log(d / "dvl.csv", DvlLog, dv[:, 0], dv[:, 1:4], _valid(dv[:, 4], d / "dvl.csv"),
+                   dv[:, 5:] if dv.shape[1] > 5 else None)
         ah = _floats(d / "ahrs.csv", _AHRS)
-        attitude = AttitudeLog(ah[:, 0], ah[:, 1:4])
+        attitude = _log(d / "ahrs.csv", AttitudeLog, ah[:, 0], ah[:, 1:4])
         de = _floats(d / "depth.csv", _DEPTH)
-        depth = DepthLog(de[:, 0], de[:, 1])
+        depth = _log(d / "depth.csv", DepthLog, de[:, 0], de[:, 1])
         truth = None
         files = meta.get("files") or {}
         if not isinstance(files, dict):
             raise DatasetError(f"The mission file {str(meta_path)!r} key 'files' must be an object. Got {files!r} instead.")
         if files.get("vehicle_truth"):
             ve = _floats(d / "ground_truth" / "vehicle.csv", _VEHICLE)
-            truth = VehicleTruth(ve[:, 0], ve[:, 1:4], ve[:, 4:7], ve[:, 7:10])
+            truth = _log(d / "ground_truth" / "vehicle.csv", VehicleTruth, ve[:, 0], ve[:, 1:4], ve[:, 4:7], ve[:, 7:10])
         objects = _read_objects(d / "ground_truth" / "objects.csv") if (d / "ground_truth" / "objects.csv").exists() else []
         scans = _read_index(d / "scans" / "index.csv") if (d / "scans" / "index.csv").exists() else []
         metadata = {k: v for k, v in meta.items() if k not in ("T_vehicle_scanner", "files", "format_version", "seed")}
@@ -230,6 +231,14 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
         raise DatasetError(f"{exc}" if str(d) in str(exc) else f"The mission in {str(d)!r}: {exc}") from None
     except SemslamError as exc:  # e.g. a non-rotation quaternion
         raise DatasetError(f"The mission in {str(d)!r} is malformed: {exc}") from None
+
+
+def _log(path: Path, cls, *columns):
+    """``cls(*columns)``, its validation error naming the file (a row k of the log is line k + 2 of the file)."""
+    try:
+        return cls(*columns)
+    except DatasetError as exc:
+        raise DatasetError(f"The mission file {str(path)!r}: {exc} (row r is line r + 2)") from None
 
 
 def _valid(col: np.ndarray, path: Path) -> np.ndarray:
