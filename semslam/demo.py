@@ -140,9 +140,9 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     for descriptor in ("esf", "vfh"):
         for clf_name in ("svm", "chi2"):
             clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
-            with _progress_bar(progress and clf_name == "svm", f"LOO {descriptor.upper()} SVM", "fold") as bar:
-                res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
-                                 descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1, progress=bar)
+            res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
+                             descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1,
+                             progress=progress and clf_name == "svm")
             evaluations[f"{descriptor}_{clf_name}"] = res
             _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
 
@@ -175,28 +175,6 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     report = stages.run("write report", build_report, out)
     metrics["report"] = str(report)
     return metrics
-
-
-class _progress_bar:
-    """A tqdm bar usable as a ``progress(done, total)`` callback; a no-op when disabled."""
-
-    def __init__(self, enabled: bool, desc: str, unit: str):
-        self.enabled, self.desc, self.unit, self.bar = enabled, desc, unit, None
-
-    def __enter__(self):
-        return self if self.enabled else None
-
-    def __call__(self, done: int, total: int) -> None:
-        if self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, desc=self.desc, unit=self.unit, leave=False)
-        self.bar.n = done
-        self.bar.refresh()
-
-    def __exit__(self, *exc) -> None:
-        if self.bar is not None:
-            self.bar.close()
 
 
 def _svm_for_loo(db, descriptor: str, cfg: DemoConfig):

@@ -130,7 +130,7 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     if args.no_smooth:
         overrides["smooth"] = False
     res = run_montecarlo(args.runs, modes=modes, yaw_bias_deg=args.yaw_bias_deg, seed=args.seed, source=args.source,
-                         loops=args.loops, progress=None if getattr(args, "json", False) else
+                         loops=args.loops, log=None if getattr(args, "json", False) else
                          (lambda s: print(s, file=sys.stderr)), yaw_bias_walk_deg_per_sqrt_s=args.yaw_bias_walk,
                          white_dvl=args.white_dvl,
                          config_overrides=overrides or None)

@@ -32,6 +32,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .._progress import Progress, progress_steps
 from .._tables import read_table
 from ..errors import BagError, DatasetError
 from .vehicle import VehicleDescription
@@ -253,18 +254,36 @@ def _vehicle_with_tf(bag, tmap: TopicMap, vehicle: VehicleDescription, scan_fram
     return vehicle.replace(scanner=dc_replace(vehicle.scanner, T_vehicle_scanner=T)), "/tf_static"
 
 
+def _write_scan(payload, t: float, scratch: Path, index: int):
+    """Write one decoded PointCloud2 as ``scans/scan_NNNNN.pcd`` (a per-point ``t`` field, seconds from the scan's
+    first point) and return its :class:`ScanRecord`."""
+    from dataclasses import replace as dc_replace
+
+    from ..io import write_point_cloud
+    from .logs import ScanRecord
+
+    n = len(payload.points_xyz_m)
+    offs = payload.time_offset_s if payload.time_offset_s is not None else np.zeros(n)
+    cloud = payload.to_point_cloud()
+    fields = {k: v for k, v in cloud.fields.items() if k not in ("t", "time", "timestamp", "time_offset_s")}
+    fields["t"] = (offs - offs.min()).astype(np.float64)
+    cloud = dc_replace(cloud, fields=fields, frame_id="scanner")
+    path = f"scans/scan_{index:05d}.pcd"
+    write_point_cloud(scratch / path, cloud, encoding="binary_compressed")
+    return ScanRecord(index, t + float(offs.min()), t + float(offs.max()), path, cloud.n_points)
+
+
 def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic_map: TopicMap | None = None,
                vehicle: VehicleDescription | None = None, msg_dirs=(), overwrite: bool = False,
-               progress: bool = False) -> Path:
+               progress: Progress = False) -> Path:
     """Convert a bag into a mission directory (format 2; scans as PCD with a per-point ``t`` field in seconds
     from the scan's start). Scans are written as they come; the directory appears only when complete."""
     import shutil
     import tempfile
 
-    from ..io import write_point_cloud
     from ..io.ros import open_bag
     from .dataset import Dataset
-    from .logs import AttitudeLog, DepthLog, DvlLog, ScanRecord
+    from .logs import AttitudeLog, DepthLog, DvlLog
     from .mission_dir import write_mission
 
     vehicle = VehicleDescription.girona500() if vehicle is None else vehicle
@@ -274,38 +293,23 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
     out.parent.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".scans", dir=out.parent))
     logs: dict[str, list] = {"attitude": [], "dvl": [], "depth": []}
-    records, bar = [], None
+    records = []
     try:
         with open_bag(bag_path, msg_dirs=msg_dirs) as bag:
             tmap = topic_map or suggest_topic_map(bag)
-            if progress:
-                from tqdm import tqdm
-
-                total = sum(r.count for r in bag.topics() if r.topic in (tmap.scans, tmap.attitude, tmap.dvl, tmap.depth))
-                bar = tqdm(total=total, desc="bag", unit="msg", leave=False)
+            total = sum(r.count for r in bag.topics() if r.topic in (tmap.scans, tmap.attitude, tmap.dvl, tmap.depth))
             origin: list = [0]
             extrinsics = None
-            for t, kind, payload in stream_bag(bag, tmap, vehicle, origin):
-                if bar is not None:
-                    bar.update(1)
-                if kind != "scan":
-                    logs[kind].append((t, payload))
-                    continue
-                if extrinsics is None:
-                    vehicle, extrinsics = _vehicle_with_tf(bag, tmap, vehicle, payload.frame_id)
-                if payload.points_xyz_m.shape[0] == 0:
-                    continue
-                offs = payload.time_offset_s if payload.time_offset_s is not None else np.zeros(len(payload.points_xyz_m))
-                start, end = t + float(offs.min()), t + float(offs.max())
-                cloud = payload.to_point_cloud()
-                fields = {k: v for k, v in cloud.fields.items() if k not in ("t", "time", "timestamp", "time_offset_s")}
-                fields["t"] = (offs - offs.min()).astype(np.float64)
-                from dataclasses import replace as dc_replace
-
-                cloud = dc_replace(cloud, fields=fields, frame_id="scanner")
-                path = f"scans/scan_{len(records):05d}.pcd"
-                write_point_cloud(scratch / path, cloud, encoding="binary_compressed")
-                records.append(ScanRecord(len(records), start, end, path, cloud.n_points))
+            with progress_steps(progress, total, "bag", "msg") as step:
+                for t, kind, payload in stream_bag(bag, tmap, vehicle, origin):
+                    step()
+                    if kind != "scan":
+                        logs[kind].append((t, payload))
+                        continue
+                    if extrinsics is None:
+                        vehicle, extrinsics = _vehicle_with_tf(bag, tmap, vehicle, payload.frame_id)
+                    if payload.points_xyz_m.shape[0]:
+                        records.append(_write_scan(payload, t, scratch, len(records)))
         att = sorted(logs["attitude"], key=lambda r: r[0])
         dvl = sorted(logs["dvl"], key=lambda r: r[0])
         dep = sorted(logs["depth"], key=lambda r: r[0])
@@ -325,8 +329,6 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
             raise BagError(f"Bag {str(bag_path)!r}: the attitude topic {tmap.attitude!r} has no usable message.")
         return write_mission(ds, out, overwrite=overwrite)
     finally:
-        if bar is not None:
-            bar.close()
         shutil.rmtree(scratch, ignore_errors=True)
 
 

@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._progress import Progress, progress_steps
 from .._atomic import atomic_write_text
 from .._validation import check_int
 from ..errors import SlamError
@@ -92,12 +93,15 @@ class MonteCarloResult:
 
 def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_deg: float = 0.0, seed: int = 0,
                    source: str = "auto", loops: int = 3, config_overrides: dict | None = None,
-                   progress: Callable[[str], None] | None = None, yaw_bias_walk_deg_per_sqrt_s: float = 0.0,
+                   progress: Progress = False, log: Callable[[str], None] | None = None,
+                   yaw_bias_walk_deg_per_sqrt_s: float = 0.0,
                    white_dvl: bool = False) -> MonteCarloResult:
     """Run ``n_runs`` seeded missions in each of ``modes``; see the module docstring.
 
     ``yaw_bias_deg`` / ``yaw_bias_walk_deg_per_sqrt_s``: AHRS yaw bias of the missions (constant, random walk);
-    ``config_overrides``: SlamConfig fields (e.g. ``{"surveyed_objects": ["reducing_socket_0"]}``).
+    ``config_overrides``: SlamConfig settings (e.g. ``{"surveyed_objects": ["reducing_socket_0"]}``);
+    ``progress``: a bar or ``progress(done, total)`` per run and mode (:mod:`semslam._progress`); ``log``: one line
+    per run and mode (its ATE).
     Summary per mode: ATE (mean, median, max), DR/mode ATE ratio, final error, mean 3-sigma at 1/3, 2/3 and
     the end of the mission, position ANEES with its band and the fraction of epochs in it, and the landmark
     ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
@@ -113,27 +117,29 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     err_r: dict = {m: [] for m in modes}
     met: dict = {m: [] for m in modes}
     stamps = None
-    for i in range(n_runs):
-        mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
-                               yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
-                               white_dvl=white_dvl)
-        cfg = SlamConfig().updated(**(config_overrides or {}))
-        for mode in modes:
-            res = run_truth_slam(mission, mode=mode, config=cfg, seed=seed + i)
-            if res.truth_position_ned_m is None:
-                raise SlamError("Monte-Carlo runs need missions with ground truth.")
-            e = res.position_ned_m - res.truth_position_ned_m
-            nees_r[mode].append(nees(e, res.position_cov_m2))
-            if res.smoothed_position_ned_m is not None:
-                nees_s[mode].append(nees(res.smoothed_position_ned_m - res.truth_position_ned_m,
-                                         res.smoothed_position_cov_m2))
-            sig_r[mode].append(3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)))
-            err_r[mode].append(np.linalg.norm(e, axis=1))
-            met[mode].append(res.metrics)
-            if stamps is None or len(res.stamps_s) < len(stamps):
-                stamps = res.stamps_s - res.stamps_s[0]
-            if progress:
-                progress(f"run {i + 1}/{n_runs} {mode}: ATE {res.metrics['ate_rmse_m']:.4f} m")
+    with progress_steps(progress, n_runs * len(modes), "Monte Carlo", "run") as step:
+        for i in range(n_runs):
+            mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
+                                   yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
+                                   white_dvl=white_dvl)
+            cfg = SlamConfig().updated(**(config_overrides or {}))
+            for mode in modes:
+                res = run_truth_slam(mission, mode=mode, config=cfg, seed=seed + i)
+                if res.truth_position_ned_m is None:
+                    raise SlamError("Monte-Carlo runs need missions with ground truth.")
+                e = res.position_ned_m - res.truth_position_ned_m
+                nees_r[mode].append(nees(e, res.position_cov_m2))
+                if res.smoothed_position_ned_m is not None:
+                    nees_s[mode].append(nees(res.smoothed_position_ned_m - res.truth_position_ned_m,
+                                             res.smoothed_position_cov_m2))
+                sig_r[mode].append(3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)))
+                err_r[mode].append(np.linalg.norm(e, axis=1))
+                met[mode].append(res.metrics)
+                if stamps is None or len(res.stamps_s) < len(stamps):
+                    stamps = res.stamps_s - res.stamps_s[0]
+                step()
+                if log is not None:
+                    log(f"run {i + 1}/{n_runs} {mode}: ATE {res.metrics['ate_rmse_m']:.4f} m")
     K = len(stamps)
     summary = {}
     out = {}

@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._progress import Progress, progress_steps
 from ..dataset import Dataset, ScanRecord
 from ..detection import Detection
 from ..errors import InputError
@@ -50,7 +51,7 @@ class MissionDetections:
 
 
 def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
-                   progress: bool = False,
+                   progress: Progress = False,
                    on_scan: Callable[[ScanRecord, object, RecognitionResult], None] | None = None) -> MissionDetections:
     """Recognise the objects of every scan of ``dataset``.
 
@@ -63,8 +64,8 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         Scan ``k`` is recognised with seed ``seed * 100003 + k``: the same seed gives the same detections.
     keep_unreliable : bool
         Keep detections whose pose is flagged unreliable (default: only reliable ones go to SLAM).
-    progress : bool
-        A progress bar (scans).
+    progress : bool or callable
+        A bar, or ``progress(done, total)`` after every scan (:mod:`semslam._progress`).
     on_scan : callable, optional
         ``on_scan(record, cloud, result)`` after each scan (e.g. scoring against ground truth, figures).
     """
@@ -75,12 +76,7 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
                          f"{type(recognizer).__name__} instead.")
     out = MissionDetections()
     scans = dataset.scans
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(scans), desc="recognise", unit="scan", leave=False)
-    try:
+    with progress_steps(progress, len(scans), "recognise", "scan") as step:
         for rec in scans:
             cloud = dataset.load_scan(rec.scan_id)
             stamps = dataset.point_stamps_s(rec, cloud)
@@ -94,9 +90,5 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
                               "n_kept": len(kept), "timings_ms": dict(result.timings_ms)})
             if on_scan is not None:
                 on_scan(rec, cloud, result)
-            if bar is not None:
-                bar.update(1)
-    finally:
-        if bar is not None:
-            bar.close()
+            step()
     return out

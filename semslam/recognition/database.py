@@ -31,7 +31,7 @@ import json
 import os
 import zipfile
 import zlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import progress_steps
 from .._atomic import atomic_open
 from .._validation import as_float_array, as_rng, check_choice, check_int, check_positive
 from ..cloud import PointCloud
@@ -438,8 +439,8 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         laser clusters and Kinect views have the same density. None keeps the raw views (the papers).
     seed : int or Generator, default 0
         Every view's ESF gets its own seed drawn from it: the database is reproducible.
-    progress : bool
-        Show a tqdm progress bar.
+    progress : bool or callable
+        A bar, or ``progress(done, total)`` after every view (:mod:`semslam._progress`).
     model_views : sequence of (label, view_id, PointCloud), optional
         Pose-model views (object frame, with viewpoints), stored without descriptors: pose estimation
         fuses them instead of the recognition views of their class (:meth:`ViewDatabase.pose_views`).
@@ -462,20 +463,17 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     models = _check_model_views(model_views, class_infos, caller)
     variant = vfh_variant if vfh_variant is not None else _vfh_default_variant()
     view_seeds = rng.integers(0, 2**31 - 1, size=len(views))
-    iterator: Iterable = enumerate(views)
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, total=len(views), desc="descriptors", unit="view")
     esf = np.empty((len(views), ESF_BINS), np.float32)
     vfh = np.empty((len(views), VFH_BINS), np.float32)
-    for k, (label, view_id, cloud) in iterator:
-        try:
-            d = compute_view_descriptors(cloud, vfh_variant=variant, normal_radius_m=radius,
-                                         esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]))
-        except SemslamError as exc:
-            raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
-        esf[k], vfh[k] = d.esf, d.vfh
+    with progress_steps(progress, len(views), "descriptors", "view") as step:
+        for k, (label, view_id, cloud) in enumerate(views):
+            try:
+                d = compute_view_descriptors(cloud, vfh_variant=variant, normal_radius_m=radius,
+                                             esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]))
+            except SemslamError as exc:
+                raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
+            esf[k], vfh[k] = d.esf, d.vfh
+            step()
     counts = np.array([v[2].n_points for v in views], dtype=np.int64)
     params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
               "seed": seed if isinstance(seed, int) else None}

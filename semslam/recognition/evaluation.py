@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import progress_steps
 from .._validation import as_rng, check_choice, check_int
 from ..errors import RecognitionError
 from . import _chi2_kernels
@@ -116,8 +117,8 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
     n_jobs : int
         Processes fitting the folds of a trained classifier in parallel (joblib; -1 = every core). The result
         does not depend on it: every fold's estimator and seed are fixed before any is fitted.
-    progress : callable, optional
-        Called as ``progress(n_done, n_folds)`` after every fitted fold (e.g. to drive a progress bar).
+    progress : bool or callable, optional
+        A bar, or ``progress(n_done, n_folds)`` after every fitted fold (:mod:`semslam._progress`).
     """
     if not isinstance(db, ViewDatabase):
         raise RecognitionError(f"The 'db' argument of leave_one_out must be a ViewDatabase. Got {type(db).__name__} instead.")
@@ -148,10 +149,10 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         jobs = Parallel(n_jobs=n_jobs or 1, return_as="generator")(
             delayed(_fit_predict_fold)(est, X, y, i) for i, est in enumerate(estimators))
         folds = []
-        for fold in jobs:  # in fold order
-            folds.append(fold)
-            if progress is not None:
-                progress(len(folds), len(estimators))
+        with progress_steps(progress, len(estimators), "leave-one-out", "fold") as step:
+            for fold in jobs:  # in fold order
+                folds.append(fold)
+                step()
         predicted = np.array([p for p, _ in folds], dtype=object)
         chosen = [c for _, c in folds if c is not None]
         predicted = predicted.astype(str)

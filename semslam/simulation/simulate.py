@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._progress import progress_steps
 from .._validation import check_positive
 from ..errors import SimulationError
 from ..geometry import RigidTransform
@@ -121,23 +122,20 @@ def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, confi
     centres = np.array([o.T_world_object.translation_m for o in world.objects]).reshape(-1, 3)
     mids = traj.sample(starts + scanner.duration_s / 2).T_world_vehicle() @ T_vs
     records, clouds = [], {}
-    iterator = range(len(starts))
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, desc="scans", unit="scan")
-    for k in iterator:
-        # draw the scan's noise generator for every candidate so kept scans do not depend on gating
-        scan_rng = np.random.default_rng(rng.integers(0, 2**63))
-        if config.scanner.only_when_objects_in_view and not scanner.footprint_contains(mids[k], centres).any():
-            continue
-        stamps = scanner.line_stamps(starts[k])
-        T_lines = traj.sample(stamps).T_world_vehicle() @ T_vs
-        result = scanner.scan(caster, T_lines, seed=scan_rng, face_instance=world.face_instance, line_stamps_s=stamps)
-        scan_id = len(records)
-        records.append(ScanRecord(scan_id, float(stamps[0]), float(stamps[-1]), f"scans/scan_{scan_id:05d}.pcd",
-                                  result.cloud.n_points))
-        clouds[scan_id] = result.cloud
+    with progress_steps(progress, len(starts), "scans", "scan") as step:
+        for k in range(len(starts)):
+            step()
+            # draw the scan's noise generator for every candidate so kept scans do not depend on gating
+            scan_rng = np.random.default_rng(rng.integers(0, 2**63))
+            if config.scanner.only_when_objects_in_view and not scanner.footprint_contains(mids[k], centres).any():
+                continue
+            stamps = scanner.line_stamps(starts[k])
+            T_lines = traj.sample(stamps).T_world_vehicle() @ T_vs
+            result = scanner.scan(caster, T_lines, seed=scan_rng, face_instance=world.face_instance, line_stamps_s=stamps)
+            scan_id = len(records)
+            records.append(ScanRecord(scan_id, float(stamps[0]), float(stamps[-1]), f"scans/scan_{scan_id:05d}.pcd",
+                                      result.cloud.n_points))
+            clouds[scan_id] = result.cloud
     return records, clouds
 
 
