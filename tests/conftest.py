@@ -1,4 +1,9 @@
-"""Shared fixtures: where the shared data and the PCL oracle are, skipping cleanly when absent."""
+"""Shared fixtures: where the shared data and the PCL oracle are, skipping cleanly when absent.
+
+No silent skips: the run ends with one line saying how many tests were skipped and why, and a run that must
+have the data fails instead of skipping: ``SEMSLAM_REQUIRE_SHARED=1`` (``../shared`` and the data in it; CI sets
+it, since CI always has ``../shared`` beside the clone) and ``SEMSLAM_REQUIRE_PCL=1`` (the ``pcl_ref`` oracle).
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,36 @@ TEST_DATA = Path(__file__).resolve().parent / "data"
 SHARED = Path(os.environ.get("SEMSLAM_SHARED", ROOT.parent / "shared"))
 
 
+def _missing(what: str, env: str) -> None:
+    """Skip (with the reason) unless ``env`` says this run must have ``what``: then fail."""
+    if os.environ.get(env, "") not in ("", "0"):
+        pytest.fail(f"{what} (required by {env}=1)")
+    pytest.skip(what)
+
+
+def require_shared(path: Path, what: str) -> Path:
+    """``path`` from ``../shared``, or a skip (a failure under SEMSLAM_REQUIRE_SHARED=1) naming ``what``."""
+    if not path.exists():
+        _missing(f"{what} not found at {path}", "SEMSLAM_REQUIRE_SHARED")
+    return path
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """One closing line: how many tests were skipped, grouped by reason."""
+    skipped = terminalreporter.stats.get("skipped", [])
+    if not skipped:
+        terminalreporter.write_line("semslam: no test skipped")
+        return
+    reasons: dict[str, int] = {}
+    for rep in skipped:
+        longrepr = rep.longrepr
+        reason = longrepr[2] if isinstance(longrepr, tuple) and len(longrepr) == 3 else str(longrepr)
+        reason = reason.removeprefix("Skipped: ")
+        reasons[reason] = reasons.get(reason, 0) + 1
+    text = "; ".join(f"{n} x {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+    terminalreporter.write_line(f"semslam: {len(skipped)} test(s) skipped: {text}")
+
+
 @pytest.fixture(scope="session")
 def test_data() -> Path:
     """``tests/data``: small fixtures that always ship with the repository."""
@@ -22,18 +57,14 @@ def test_data() -> Path:
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """``../shared`` beside the clone; tests that need it skip when it is absent."""
-    if not SHARED.is_dir():
-        pytest.skip(f"shared data folder not found at {SHARED} (set SEMSLAM_SHARED)")
-    return SHARED
+    return require_shared(SHARED, "shared data folder (set SEMSLAM_SHARED)")
 
 
 @pytest.fixture(scope="session")
 def real_data(shared_dir: Path) -> Path:
     """``../shared/data/real``: PCL's real test scans."""
     path = shared_dir / "data" / "real"
-    if not path.is_dir():
-        pytest.skip(f"real scans not found at {path}")
-    return path
+    return require_shared(path, "real scans")
 
 
 @pytest.fixture(scope="session")
@@ -44,4 +75,4 @@ def pcl_ref() -> str:
     for c in candidates:
         if c and os.access(c, os.X_OK):
             return c
-    pytest.skip("pcl_ref oracle not built (run ../shared/pcl_oracle/build.sh)")
+    _missing("pcl_ref oracle not built (run ../shared/pcl_oracle/build.sh)", "SEMSLAM_REQUIRE_PCL")

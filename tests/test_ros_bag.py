@@ -51,9 +51,9 @@ def _watchdog():
 
 @pytest.fixture(scope="module")
 def real_bag() -> Path:
-    if not REAL_BAG.is_file():
-        pytest.skip(f"real ROS 1 bag not found at {REAL_BAG} (the ../shared data folder is absent)")
-    return REAL_BAG
+    from conftest import require_shared
+
+    return require_shared(REAL_BAG, "real ROS 1 bag (../shared/data/bags)")
 
 
 def test_real_ros1_bag_topics(real_bag: Path) -> None:
