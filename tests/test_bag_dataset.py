@@ -139,3 +139,24 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
     assert main(["bag", "info", str(tmp_path / "junk.bag")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "junk.bag" in err[0]
+
+
+def test_report_of_a_dive_without_ground_truth(tmp_path):
+    """A recorded dive has no truth: the report leaves the truth-based sections out and still shows the
+    trajectories, the 3-sigma bounds over time and the landmark maps."""
+    from semslam.experiments.synthetic import square_mission
+    from semslam.report.build import build_report
+    from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
+    from semslam.slam import run_slam, write_run
+    from semslam.slam.rundir import mode_dir
+
+    m = square_mission(seed=1, loops=1)
+    dets = simulate_detections(m, TruthDetectionConfig(), seed=1)
+    dive = replace(m, truth=None, objects=[])
+    for mode in ("dr", "pose"):
+        res = run_slam(dive, dets, mode=mode, symmetries={})
+        assert "ate_rmse_m" not in res.metrics and res.truth_position_ned_m is None
+        write_run(res, mode_dir(tmp_path, mode))
+    html = build_report(tmp_path).read_text()
+    assert "no ground truth" in html and "Landmark maps" in html and "Fig. 4" in html
+    assert "NEES over time" not in html and "Fig. 6: position error" not in html

@@ -400,7 +400,36 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
             sections.append(Section("Heading-bias mode (beyond the papers)",
                                     "With an AHRS yaw-bias state, object orientations make the heading observable.",
                                     figures=[Figure("heading_bias.png", figure_to_png(fig), "Estimated yaw bias.")]))
+    else:  # a recorded dive: no truth, so what the filter says of itself
+        sections += _sections_without_truth(trajs, landmarks, plt)
     return sections
+
+
+def _sections_without_truth(trajs: dict, landmarks: dict, plt) -> list[Section]:
+    """Without ground truth: the 3-sigma position bounds over time per mode, and the maps as tables."""
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    for mode, tr in trajs.items():
+        P = tr["position_cov"]
+        ax.plot(tr["stamp_s"], 3.0 * np.sqrt(np.clip(P[:, 0, 0] + P[:, 1, 1], 0, None)), lw=0.9, label=mode)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("horizontal 3-sigma [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title("Horizontal position uncertainty (3-sigma) per mode")
+    out = [Section("Position uncertainty over time (no ground truth)",
+                   "The dataset has no ground truth: errors and consistency against it are not shown. Dead "
+                   "reckoning's bound grows; SLAM's shrinks at every landmark update.",
+                   figures=[Figure("fig6_bounds.png", figure_to_png(fig), "3-sigma position bounds.")])]
+    rows = []
+    for mode, lms in landmarks.items():
+        for k, lm in enumerate(lms):
+            sig = np.sqrt(np.clip(np.diag(lm["cov"]), 0, None))
+            rows.append([mode, k, lm["label"], *[float(v) for v in lm["position_ned_m"]], *[float(v) for v in sig]])
+    if rows:
+        out.append(Section("Landmark maps", "Each mode's map at the end of the dive (world NED).",
+                           tables=[("Landmarks", ["mode", "#", "class", "x (m)", "y (m)", "z (m)", "sigma x (m)",
+                                                   "sigma y (m)", "sigma z (m)"], rows)]))
+    return out
 
 
 def _section_consensus(run_dir: Path, plt) -> Section | None:
