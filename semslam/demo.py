@@ -22,7 +22,6 @@ Run directory layout (every file written atomically)::
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from ._atomic import atomic_write_text
+from ._outdir import staged_output_dir
 from ._jsonable import to_jsonable
 from .errors import InputError
 from .experiments.recognition_scoring import recognition_summary, score_scan
@@ -110,8 +110,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
              log: Callable[[str], None] = print, overwrite: bool = False) -> dict:
     """Run the whole mission and write the run directory ``out_dir``; return the headline metrics.
 
-    Raises :class:`~semslam.errors.InputError` if ``out_dir`` exists and is not empty (unless
-    ``overwrite``): a run never mixes its files with another's.
+    Raises :class:`~semslam.errors.InputError` if ``out_dir`` is a file, a non-empty directory semslam did not
+    write, or an earlier run (unless ``overwrite``): a run never mixes its files with another's.
     """
     from .recognition import build_database, leave_one_out, save_database
     from .dataset import read_mission, write_mission
@@ -119,61 +119,59 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 
     cfg = DemoConfig() if config is None else config
-    out = Path(out_dir)
-    if out.exists() and any(out.iterdir()):
-        if not overwrite:
-            raise InputError(f"The output directory {str(out)!r} exists and is not empty: choose another, or overwrite it.")
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    stages = _Stages(log)
-    t_start = time.perf_counter()
+    final = Path(out_dir)
+    # built beside the target and swapped in at the end: a killed demo leaves the previous run intact, and only a
+    # directory semslam wrote is ever replaced (semslam._outdir)
+    with staged_output_dir(final, overwrite=overwrite, kind="demo") as out:
+        stages = _Stages(log)
+        t_start = time.perf_counter()
 
-    # 1. the built-in database and its leave-one-out evaluation (the papers' Tables 1 and 2)
-    views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
-                                seed=cfg.seed, config=SURVEY_KINECT)
-    model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
-                                seed=cfg.seed, config=POSE_MODEL_KINECT)
-    db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
-                    model_views=model_views, progress=progress)
-    save_database(db, out / "db.npz")
-    evaluations = {}
-    for descriptor in ("esf", "vfh"):
-        for clf_name in ("svm", "chi2"):
-            clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
-            res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
-                             descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1,
-                             progress=progress and clf_name == "svm")
-            evaluations[f"{descriptor}_{clf_name}"] = res
-            _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
+        # 1. the built-in database and its leave-one-out evaluation (the papers' Tables 1 and 2)
+        views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
+                                    seed=cfg.seed, config=SURVEY_KINECT)
+        model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
+                                    seed=cfg.seed, config=POSE_MODEL_KINECT)
+        db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
+                        model_views=model_views, progress=progress)
+        save_database(db, out / "db.npz")
+        evaluations = {}
+        for descriptor in ("esf", "vfh"):
+            for clf_name in ("svm", "chi2"):
+                clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
+                res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
+                                 descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1,
+                                 progress=progress and clf_name == "svm")
+                evaluations[f"{descriptor}_{clf_name}"] = res
+                _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
 
-    # 2. the mission
-    sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
-    mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress)
-    stages.run("write mission", write_mission, mission, out / "mission")
-    # from here on the demo works on the mission as written (float32 scans), exactly what `semslam detect` and
-    # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
-    mission = read_mission(out / "mission")
+        # 2. the mission
+        sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
+        mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress)
+        stages.run("write mission", write_mission, mission, out / "mission")
+        # from here on the demo works on the mission as written (float32 scans), exactly what `semslam detect` and
+        # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
+        mission = read_mission(out / "mission")
 
-    # 3. recognition on every scan
-    rec_out = stages.run("recognise objects in every scan", _recognize_mission, mission, db, cfg, out, progress)
+        # 3. recognition on every scan
+        rec_out = stages.run("recognise objects in every scan", _recognize_mission, mission, db, cfg, out, progress)
 
-    # 4. SLAM in every mode on the same detections
-    slam_results = stages.run("SLAM in every mode", _run_slam_modes, mission, rec_out["detections_by_scan"], cfg, out)
+        # 4. SLAM in every mode on the same detections
+        slam_results = stages.run("SLAM in every mode", _run_slam_modes, mission, rec_out["detections_by_scan"], cfg, out)
 
-    # 5. consensus figure data, metrics, report
-    _write_consensus(out, mission, rec_out["detections_by_scan"], slam_results.get("pose"))
-    metrics = _headline_metrics(evaluations, rec_out["summary"], slam_results)
-    metrics["timings_s"] = dict(stages.timings_s)
-    metrics["timings_s"]["total"] = time.perf_counter() - t_start
-    _write_json(out / "metrics.json", metrics)
-    _write_json(out / "config.json", {
-        "demo": asdict(cfg), "simulator": sim_cfg.to_dict(), "pipeline": rec_out["pipeline_config"],
-        "slam": {m: r.config.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
-    })
-    from .report.build import build_report
+        # 5. consensus figure data, metrics, report
+        _write_consensus(out, mission, rec_out["detections_by_scan"], slam_results.get("pose"))
+        metrics = _headline_metrics(evaluations, rec_out["summary"], slam_results)
+        metrics["timings_s"] = dict(stages.timings_s)
+        metrics["timings_s"]["total"] = time.perf_counter() - t_start
+        _write_json(out / "metrics.json", metrics)
+        _write_json(out / "config.json", {
+            "demo": asdict(cfg), "simulator": sim_cfg.to_dict(), "pipeline": rec_out["pipeline_config"],
+            "slam": {m: r.config.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
+        })
+        from .report.build import build_report
 
-    report = stages.run("write report", build_report, out)
-    metrics["report"] = str(report)
+        stages.run("write report", build_report, out)
+    metrics["report"] = str(final / "report.html")
     return metrics
 
 

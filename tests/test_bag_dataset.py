@@ -134,7 +134,7 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
         assert (run / "slam" / "pose" / name).is_file(), name
     assert "ate_rmse_m" not in payload["slam"]["pose"]  # no ground truth in a bag: no error metrics
     assert main(["run", str(bag), "--db", "builtin", "--out", str(run)]) == 1
-    assert "new or empty directory" in capsys.readouterr().err
+    assert "holds an earlier semslam run" in capsys.readouterr().err
     (tmp_path / "junk.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
     assert main(["bag", "info", str(tmp_path / "junk.bag")]) == 1
     err = capsys.readouterr().err.strip().splitlines()

@@ -79,7 +79,7 @@ def test_refuses_to_mix_runs(quick_run, capsys):
 
     out, _ = quick_run
     assert main(["demo", "--quick", "--out", str(out)]) == 1
-    assert "not empty" in capsys.readouterr().err
+    assert "holds an earlier semslam run" in capsys.readouterr().err
 
 
 def test_slam_runs_are_reported_alike(quick_run, tmp_path):

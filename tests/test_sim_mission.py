@@ -128,7 +128,7 @@ def test_same_seed_gives_byte_identical_directories(tmp_path, tiny_mission):
     write_mission(tiny_mission, tmp_path / "a")
     write_mission(simulate_mission(_tiny(), seed=7), tmp_path / "b")
     files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
-    assert len(files) == 7 + 1 + len(tiny_mission.scans)  # 6 CSV/JSON, vehicle.toml, index, scans
+    assert len(files) == 7 + 2 + len(tiny_mission.scans)  # 6 CSV/JSON, vehicle.toml, index, marker, scans
     _, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", [str(f) for f in files], shallow=False)
     assert not mismatch and not errors
     write_mission(simulate_mission(_tiny(), seed=8), tmp_path / "c")

@@ -13,7 +13,9 @@ def register(subparsers, common) -> None:
                                           "recognition on every scan, SLAM in every mode (or one), and the report.")
     p.add_argument("dive", metavar="BAG|MISSION")
     p.add_argument("--db", required=True, metavar="DB", help="view database (.npz), or 'builtin'")
-    p.add_argument("--out", required=True, metavar="RUN", help="run directory to create (must be new or empty)")
+    p.add_argument("--out", required=True, metavar="RUN", help="run directory to create (new, or an earlier run with "
+                                                                "--overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier semslam run in --out")
     p.add_argument("--vehicle", help="vehicle description (TOML); for a mission it replaces the dataset's")
     p.add_argument("--topics", help="topic map of a bag (TOML; default: `semslam bag info`'s suggestion)")
     p.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="message definitions (bags)")
@@ -26,21 +28,34 @@ def register(subparsers, common) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..dataset import read_mission, read_vehicle_toml
+    from .._outdir import staged_output_dir
     from ..errors import InputError
-    from ..pipeline import ScanRecognizer, detect_mission
-    from ..recognition import load_database
-    from ..slam import MODES, SlamConfig, run_slam, write_detections_jsonl, write_run
-    from ..slam.export import export_run
-    from ..slam.rundir import DETECTIONS, mode_dir
+    from ..slam import MODES
     from ._output import emit
 
     modes = MODES if args.mode == "all" else (args.mode,)
     if any(m not in MODES for m in modes):
         raise InputError(f"The '--mode' option must be one of {MODES} or 'all'. Got {args.mode!r} instead.")
-    out = Path(args.out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise InputError(f"The '--out' option must name a new or empty directory. Got {str(out)!r} instead.")
+    final = Path(args.out)
+    with staged_output_dir(final, overwrite=args.overwrite) as out:  # a foreign or earlier directory is never mixed
+        payload, text = _run(args, out, modes)
+    payload["out"] = str(final)
+    if payload["report"]:
+        payload["report"] = str(final / "report.html")
+    emit(args, payload, text)
+    return 0
+
+
+def _run(args: argparse.Namespace, out, modes):
+    from pathlib import Path
+
+    from ..dataset import read_mission, read_vehicle_toml
+    from ..pipeline import ScanRecognizer, detect_mission
+    from ..recognition import load_database
+    from ..slam import SlamConfig, run_slam, write_detections_jsonl, write_run
+    from ..slam.export import export_run
+    from ..slam.rundir import DETECTIONS, mode_dir
+
     src = Path(args.dive)
     progress = not getattr(args, "json", False)
     if (src / "mission.json").is_file():
@@ -81,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         from ..report.build import build_report
 
         report = build_report(out)
-    payload = {"out": str(out), "detection": found.summary(), "slam": metrics, "report": str(report) if report else None}
+    payload = {"detection": found.summary(), "slam": metrics, "report": str(report) if report else None}
 
     def text() -> str:
         s = found.summary()
@@ -91,8 +106,7 @@ def run(args: argparse.Namespace) -> int:
             ate = f", ATE {m['ate_rmse_m']:.4f} m" if "ate_rmse_m" in m else ""
             lines.append(f"{mode}: {m['n_landmarks']} landmarks{ate}")
         if report:
-            lines.append(f"report: {report}")
+            lines.append(f"report: {payload['report']}")
         return "\n".join(lines)
 
-    emit(args, payload, text)
-    return 0
+    return payload, text

@@ -16,7 +16,8 @@ def register(subparsers, common) -> None:
                                           "and write trajectory.csv, landmarks.csv, updates.csv, metrics.json.")
     p.add_argument("mission", help="mission directory, or synthetic:SEED for the built-in analytic square mission")
     p.add_argument("--mode", choices=MODE_CHOICES, default="pose", help="filter mode (all: one sub-directory per mode)")
-    p.add_argument("--out", required=True, help="run directory to write")
+    p.add_argument("--out", required=True, help="run directory to write (new, or an earlier run with --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier semslam run in --out")
     p.add_argument("--detections", help="JSON lines of Detection.to_dict(), e.g. from `semslam detect` (default, or "
                                         "'truth': truth-based detections simulated from the dataset's ground truth)")
     p.add_argument("--config", help="TOML or JSON file of SlamConfig fields (a [slam] table, or the fields at the top); "
@@ -55,6 +56,7 @@ def register(subparsers, common) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .._outdir import staged_output_dir
     from ..errors import InputError
     from ..slam import MODES, SlamConfig, read_detections_jsonl, run_slam, write_run
     from ..slam.rundir import mode_dir
@@ -81,22 +83,25 @@ def run(args: argparse.Namespace) -> int:
 
         symmetries = builtin_symmetries()
     modes = MODES if args.mode == "all" else (args.mode,)
-    out = Path(args.out)
+    final = Path(args.out)
     payload = {}
-    for mode in modes:
-        if dets is None:
-            from ..simulation.truth_slam import run_truth_slam
+    with staged_output_dir(final, overwrite=args.overwrite) as out:
+        for mode in modes:
+            if dets is None:
+                from ..simulation.truth_slam import run_truth_slam
 
-            res = run_truth_slam(mission, mode=mode, config=cfg, seed=args.seed)
-        else:
-            res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries)
-        write_run(res, mode_dir(out, mode) if len(modes) > 1 else out)
-        if args.export:
-            from ..slam.export import export_run
+                res = run_truth_slam(mission, mode=mode, config=cfg, seed=args.seed)
+            else:
+                res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries)
+            where = mode_dir(out, mode) if len(modes) > 1 else out
+            write_run(res, where)
+            if args.export:
+                from ..slam.export import export_run
 
-            export_run(res, mode_dir(out, mode) if len(modes) > 1 else out, detections_by_scan=dets or None,
-                       T_vehicle_scanner=mission.T_vehicle_scanner if dets else None)
-        payload[mode] = res.metrics
+                export_run(res, where, detections_by_scan=dets or None,
+                           T_vehicle_scanner=mission.T_vehicle_scanner if dets else None)
+            payload[mode] = res.metrics
+    out = final
 
     def text() -> str:
         lines = [f"{'mode':<14}{'ATE (m)':>10}{'final (m)':>11}{'3-sigma (m)':>13}{'NEES':>8}{'landmarks':>11}"]

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write_text
+from .._outdir import MARKER
 from ..errors import DatasetError, SemslamError
 from ..geometry import RigidTransform
 from .dataset import Dataset
@@ -82,6 +83,10 @@ def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
     out = Path(out_dir)
     if out.exists() and not overwrite:
         raise DatasetError(f"The 'out_dir' argument of write_mission must not exist (use overwrite). Got existing {str(out)!r} instead.")
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / MARKER).is_file()
+                                              and not (out / "mission.json").is_file())):
+        raise DatasetError(f"The 'out_dir' argument of write_mission must be a new directory or a mission directory "
+                           f"(semslam never replaces what it did not write). Got {str(out)!r} instead.")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     try:
@@ -113,6 +118,7 @@ def _write_into(m: Dataset, d: Path) -> None:
                      "vehicle_truth": "ground_truth/vehicle.csv" if m.truth is not None else None,
                      "objects_truth": "ground_truth/objects.csv"}
     atomic_write_text(d / "mission.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    atomic_write_text(d / MARKER, "semslam mission\n")
     write_vehicle_toml(m.vehicle, d / "vehicle.toml")
     v = m.dvl.velocity_body_mps
     cols = [m.dvl.stamp_s, v[:, 0], v[:, 1], v[:, 2], m.dvl.valid.astype(int)]
