@@ -52,16 +52,29 @@ def test_db_build_info_evaluate(views_dir, tmp_path, capsys):
 
 
 def test_db_cli_errors(tmp_path, capsys):
+    """A corrupt and a missing database: exit 1 and exactly one stderr line naming the file; no source for
+    ``db build``: usage error 2.
+
+    Catches: a traceback or a multi-line message (only the start of stderr was checked), a message that does
+    not name the file (the missing-file check did not look for the name)."""
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"PK\x03\x04 not really")
     assert main(["db", "info", str(bad)]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("semslam: error: The database file") and "bad.npz" in err
+    line = _one_line_error(capsys)
+    assert line.startswith("semslam: error: The database file") and "bad.npz" in line
     assert main(["evaluate", str(tmp_path / "missing.npz")]) == 1
-    assert "does not exist" in capsys.readouterr().err
+    line = _one_line_error(capsys)
+    assert "missing.npz" in line and "does not exist" in line
     with pytest.raises(SystemExit) as exc:
         main(["db", "build", "--out", str(tmp_path / "x.npz")])  # neither VIEWS_DIR nor --builtin
     assert exc.value.code == 2
+
+
+def _one_line_error(capsys) -> str:
+    """The CLI's error contract: stderr is exactly one line, ``semslam: error: ...`` (no traceback)."""
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error:"), lines
+    return lines[0]
 
 
 def test_db_build_builtin(tmp_path, capsys):
@@ -94,5 +107,7 @@ def test_db_build_builtin(tmp_path, capsys):
             assert 0.6 < np.linalg.norm(m.viewpoint_xyz_m) < 0.8
             half = db.class_info(label).size_xyz_m / 2
             assert np.quantile(np.max(np.abs(m.points_xyz_m) - half, axis=1), 0.99) <= 0.005
+    # catches a negative count accepted, or its error spread over several lines / not naming the value
     assert main(["db", "build", "--builtin", "--n-views", "1", "--model-views", "-1", "--out", str(out)]) == 1
-    assert "'--model-views' option must be >= 0" in capsys.readouterr().err
+    line = _one_line_error(capsys)
+    assert "'--model-views' option must be >= 0" in line and "-1" in line

@@ -60,11 +60,24 @@ def test_fpfh_text_output(capsys, bun0_files):
 
 
 def test_errors_are_one_line(capsys, bun0_files):
+    """VFH of a cloud without normals and FPFH without a radius: exit 1 and exactly one stderr line naming the
+    option to add; two normal estimators at once: usage error 2 naming both.
+
+    Catches: a multi-line message or a traceback (only ``startswith`` was checked), a message naming the wrong
+    option, a contradictory pair of options silently resolved."""
     assert main(["describe", str(bun0_files[1]), "--descriptor", "vfh"]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("semslam: error:") and "--normal-knn" in err
+    assert "--normal-knn" in _one_line_error(capsys)
     assert main(["describe", str(bun0_files[0]), "--descriptor", "fpfh"]) == 1
-    assert "--fpfh-radius" in capsys.readouterr().err
+    assert "--fpfh-radius" in _one_line_error(capsys)
     with pytest.raises(SystemExit) as exc:
         main(["describe", str(bun0_files[0]), "--normal-knn", "5", "--normal-radius", "0.1"])
     assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--normal-knn" in err and "--normal-radius" in err
+
+
+def _one_line_error(capsys) -> str:
+    """The CLI's error contract: stderr is exactly one line, ``semslam: error: ...`` (no traceback)."""
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error:"), lines
+    return lines[0]

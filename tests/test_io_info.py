@@ -62,9 +62,19 @@ def test_info_signature_file_and_ply_npy(capsys, tmp_path):
 
 
 def test_info_errors_exit_1(capsys, tmp_path):
+    """Catches a traceback or a multi-line message on a missing or truncated file (only the start of stderr
+    was checked), or a message that does not name the file and what is wrong with it."""
     assert main(["info", str(tmp_path / "missing.pcd")]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("semslam: error:") and "missing.pcd" in err and "no such file" in err
+    line = _one_line_error(capsys)
+    assert "missing.pcd" in line and "no such file" in line
     (tmp_path / "t.pcd").write_bytes(b"VERSION 0.7\nFIELDS x\n")
     assert main(["info", str(tmp_path / "t.pcd")]) == 1
-    assert "no DATA line" in capsys.readouterr().err
+    line = _one_line_error(capsys)
+    assert "t.pcd" in line and "no DATA line" in line
+
+
+def _one_line_error(capsys) -> str:
+    """The CLI's error contract: stderr is exactly one line, ``semslam: error: ...`` (no traceback)."""
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error:"), lines
+    return lines[0]

@@ -55,10 +55,20 @@ def test_recognize_text_with_pose_from_a_db_file(scene, cache, tmp_path, capsys)
 
 
 def test_recognize_errors(scene, tmp_path, capsys):
-    assert main(["recognize", str(scene), "--db", str(tmp_path / "missing.npz")]) != 0
-    assert "missing.npz" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    """A missing database is a SemslamError: exit 1 (not merely "non-zero") and exactly one stderr line naming
+    the file; an unknown --descriptor is a usage error: SystemExit 2 naming the option and the bad value.
+
+    Catches: a missing database crashing with a traceback (exit 1 from Python too, but many lines), a usage
+    error reported as exit 1, or a message that does not say which file or option is wrong."""
+    assert main(["recognize", str(scene), "--db", str(tmp_path / "missing.npz")]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error:"), lines
+    assert "missing.npz" in lines[0] and "does not exist" in lines[0]
+    with pytest.raises(SystemExit) as exc:
         main(["recognize", str(scene), "--db", "builtin", "--descriptor", "fpfh"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --descriptor" in err and "'fpfh'" in err
 
 
 def test_recognize_config_file_is_read_and_checked(scene, cache, tmp_path, capsys):

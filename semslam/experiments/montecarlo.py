@@ -29,6 +29,9 @@ def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", 
     """One mission for Monte-Carlo run ``seed`` (simulator if available, else the synthetic square).
 
     ``white_dvl``: the simulator's DVL without its systematic errors (scale, misalignment, biases)."""
+    if source not in ("auto", "simulator", "synthetic"):
+        raise SlamError(f"The 'source' argument of make_mission must be 'auto', 'simulator' or 'synthetic'. "
+                        f"Got {source!r} instead.")
     if source in ("auto", "simulator"):
         from ..simulation import simulate_mission
         from ..simulation.config import DvlConfig, SimulatorConfig
@@ -107,6 +110,9 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
     """
     n_runs = check_int("n_runs", n_runs, caller="run_montecarlo", minimum=1)
+    if isinstance(modes, str) or not len(tuple(modes)):
+        raise SlamError(f"The 'modes' argument of run_montecarlo must be a non-empty sequence of modes from {MODES}. "
+                        f"Got {modes!r} instead.")
     modes = tuple(modes)
     for mode in modes:
         if mode not in MODES:

@@ -52,7 +52,7 @@ def load_trajectory_csv(path: Path) -> dict:
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ReportError(f"cannot read {path}: {exc}") from None
     if len(rows) < 2:
         raise ReportError(f"{path} has no data rows")
@@ -61,6 +61,9 @@ def load_trajectory_csv(path: Path) -> dict:
         data = np.array(rows[1:], dtype=float)
     except ValueError as exc:
         raise ReportError(f"{path} is malformed: {exc}") from None
+    if data.ndim != 2 or data.shape[1] != len(rows[0]):
+        raise ReportError(f"{path} is malformed: rows of {data.shape[-1] if data.ndim == 2 else '?'} values under a "
+                          f"header of {len(rows[0])} columns")
     col = {name: i for i, name in enumerate(head)}
     need = ["stamp_s", "x_m", "y_m", "z_m"] + [f"cov_p_{a}{b}" for a, b in ("xx", "xy", "xz", "yy", "yz", "zz")]
     missing = [n for n in need if n not in col]
@@ -73,7 +76,10 @@ def load_trajectory_csv(path: Path) -> dict:
             cov[:, i, j] = data[:, col[key]]
     out = {"stamp_s": data[:, col["stamp_s"]], "position_ned_m": data[:, [col["x_m"], col["y_m"], col["z_m"]]],
            "position_cov": cov}
-    if "truth_x_m" in col:
+    truth_cols = [c for c in ("truth_x_m", "truth_y_m", "truth_z_m") if c in col]
+    if truth_cols and len(truth_cols) != 3:
+        raise ReportError(f"{path} lacks the columns {sorted({'truth_x_m', 'truth_y_m', 'truth_z_m'} - set(truth_cols))}")
+    if truth_cols:
         out["truth_position_ned_m"] = data[:, [col["truth_x_m"], col["truth_y_m"], col["truth_z_m"]]]
     if "yaw_bias_rad" in col:
         out["yaw_bias_rad"] = data[:, col["yaw_bias_rad"]]
@@ -111,11 +117,11 @@ def build_report(run_dir: str | Path) -> Path:
     metrics = _load_json(run_dir / "metrics.json")
     missing: list[str] = []
 
-    sec = _section_tables(run_dir, plt)
+    sec = _guarded(_section_tables, run_dir, plt, what="evaluation/*.json")
     sections.append(sec) if sec else missing.append("leave-one-out evaluation (evaluation/*.json)")
-    sec = _section_fig3(run_dir, plt)
+    sec = _guarded(_section_fig3, run_dir, plt, what="fig3_scan.npz")
     sections.append(sec) if sec else missing.append("Fig. 3 scan (fig3_scan.npz)")
-    sec = _section_recognition(run_dir, plt)
+    sec = _guarded(_section_recognition, run_dir, plt, what="recognition.json")
     sections.append(sec) if sec else missing.append("recognition against ground truth (recognition.json)")
     sec = _section_detections(run_dir)
     if sec:
@@ -125,7 +131,7 @@ def build_report(run_dir: str | Path) -> Path:
         sections.extend(_sections_slam(run_dir, slam_runs, plt))
     else:
         missing.append("SLAM outputs (slam/<mode>/trajectory.csv)")
-    sec = _section_consensus(run_dir, plt)
+    sec = _guarded(_section_consensus, run_dir, plt, what="consensus.json")
     sections.append(sec) if sec else missing.append("consensus initialisation (consensus.json)")
     if not sections:
         raise ReportError(f"nothing to report in {run_dir}: none of the expected outputs is there")
@@ -135,6 +141,16 @@ def build_report(run_dir: str | Path) -> Path:
     if missing:
         summary += " Not in this run: " + "; ".join(missing) + "."
     return write_report(run_dir, "semslam run report", sections, metrics=metrics, summary=summary)
+
+
+def _guarded(section, run_dir: Path, plt, *, what: str):
+    """``section(run_dir, plt)``; a file of the run that lacks what the section reads (a truncated or foreign
+    JSON) becomes a one-line :class:`ReportError` naming it instead of a traceback."""
+    try:
+        return section(run_dir, plt)
+    except (KeyError, TypeError, IndexError, AttributeError) as exc:
+        files = ", ".join(str(f) for f in sorted(run_dir.glob(what))) or str(run_dir / what)
+        raise ReportError(f"{files} is malformed: missing or wrong {exc}") from None
 
 
 # -- sections -----------------------------------------------------------------------------------
@@ -275,7 +291,11 @@ def _section_detections(run_dir: Path) -> Section | None:
     rows = []
     files = sorted(run_dir.glob("*.jsonl"))
     for path in files:
-        for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ReportError(f"cannot read {path}: {exc}") from None
+        for line in text.splitlines():
             if not line.strip():
                 continue
             try:

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 from .._validation import check_choice
-from ..errors import ConfigError
+from ..errors import ConfigError, SemslamError
 
 #: the filter's modes (see :mod:`semslam.slam.session`)
 MODES = ("dr", "position", "pose", "pose+heading")
@@ -35,6 +35,8 @@ def _check_types(obj) -> None:
         v = getattr(obj, f.name)
         if f.type in ("float", "int") and (isinstance(v, bool) or not isinstance(v, (int, float))):
             raise ConfigError(f"The {f.name!r} field of {name} must be a number. Got {v!r} instead.")
+        if f.type == "int" and not isinstance(v, int):
+            raise ConfigError(f"The {f.name!r} field of {name} must be an integer. Got {v!r} instead.")
         if f.type == "bool" and not isinstance(v, bool):
             raise ConfigError(f"The {f.name!r} field of {name} must be true or false. Got {v!r} instead.")
         if isinstance(v, float) and not math.isfinite(v):
@@ -238,6 +240,6 @@ class SlamConfig:
                                   f"{sorted(f'{name}.{k}' for k in names)}.")
             try:
                 kw[name] = scls(**table)
-            except ConfigError as exc:
+            except SemslamError as exc:  # ConfigError, and InputError from a choice check
                 raise ConfigError(f"{source}: {exc}") from None
         return cls(**kw)

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._atomic import atomic_write_text
 from ..detection import Detection
-from ..errors import InputError
+from ..errors import InputError, SemslamError
 
 
 def read_detections_jsonl(path: str | Path) -> dict[int, list[Detection]]:
@@ -19,13 +19,19 @@ def read_detections_jsonl(path: str | Path) -> dict[int, list[Detection]]:
     if not path.is_file():
         raise InputError(f"The detections file {str(path)!r} does not exist.")
     out: dict[int, list[Detection]] = {}
-    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"The detections file {str(path)!r} cannot be read as UTF-8 text: {exc}") from None
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         try:
             d = Detection.from_dict(json.loads(line))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"Line {n} of {str(path)!r} is not JSON: {exc.msg}.") from None
+        except (json.JSONDecodeError, RecursionError) as exc:
+            raise InputError(f"Line {n} of {str(path)!r} is not JSON: {getattr(exc, 'msg', exc)}.") from None
+        except SemslamError as exc:
+            raise InputError(f"Line {n} of {str(path)!r}: {exc}") from None
         if not np.isfinite(d.stamp_s):
             raise InputError(f"Line {n} of {str(path)!r}: a detection needs a finite 'stamp_s'. Got {d.stamp_s} instead.")
         out.setdefault(d.scan_id, []).append(d)

@@ -77,8 +77,14 @@ class SlamSession:
         self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
         self._v0 = as_float_array("initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession",
                                   error=SlamError)
-        if start_stamp_s is not None and not math.isfinite(float(start_stamp_s)):
-            raise SlamError(f"The 'start_stamp_s' argument of SlamSession must be finite. Got {start_stamp_s!r} instead.")
+        if start_stamp_s is not None:
+            try:
+                ok = not isinstance(start_stamp_s, bool) and math.isfinite(float(start_stamp_s))
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise SlamError(f"The 'start_stamp_s' argument of SlamSession must be finite (seconds). "
+                                f"Got {start_stamp_s!r} instead.")
         self._t0 = None if start_stamp_s is None else float(start_stamp_s)
         self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.motion.propagate_attitude_noise)
         self.dvl = DvlModel(vehicle, cfg.motion.dvl_use_beam_ranges)
