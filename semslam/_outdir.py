@@ -21,13 +21,15 @@ from .errors import InputError
 MARKER = ".semslam-run"
 
 
-def check_output_dir(path: str | os.PathLike, *, overwrite: bool, option: str = "--out") -> Path:
-    """Raise unless ``path`` may become a new semslam directory (see the module docstring)."""
+def check_output_dir(path: str | os.PathLike, *, overwrite: bool, option: str = "--out",
+                     markers: tuple[str, ...] = (MARKER,)) -> Path:
+    """Raise unless ``path`` may become a new semslam directory (see the module docstring); ``markers``: files
+    any of which shows a directory is semslam's (a version-1 mission directory has ``mission.json`` only)."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError(f"The {option!r} option must name a directory. Got the file {str(out)!r} instead.")
     if out.is_dir() and any(out.iterdir()):
-        if not (out / MARKER).is_file():
+        if not any((out / m).is_file() for m in markers):
             raise InputError(f"The {option!r} directory {str(out)!r} is not empty and was not written by semslam: "
                              "choose another (semslam never replaces what it did not write).")
         if not overwrite:
@@ -43,10 +45,10 @@ def _clean_stale(out: Path) -> None:
 
 @contextlib.contextmanager
 def staged_output_dir(path: str | os.PathLike, *, overwrite: bool = False, kind: str = "run",
-                      option: str = "--out") -> Iterator[Path]:
+                      option: str = "--out", markers: tuple[str, ...] = (MARKER,)) -> Iterator[Path]:
     """Yield a temporary sibling of ``path`` to write into; on success mark it and swap it in (atomically
     replacing an earlier semslam directory), on failure remove it."""
-    out = check_output_dir(path, overwrite=overwrite, option=option)
+    out = check_output_dir(path, overwrite=overwrite, option=option, markers=markers)
     out.parent.mkdir(parents=True, exist_ok=True)
     _clean_stale(out)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))

@@ -24,14 +24,12 @@ import csv
 import io
 import json
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .._atomic import atomic_write_text
-from .._outdir import MARKER
+from .._outdir import MARKER, staged_output_dir
 from ..errors import DatasetError, SemslamError
 from ..geometry import RigidTransform
 from .dataset import Dataset
@@ -87,23 +85,8 @@ def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
                                               and not (out / "mission.json").is_file())):
         raise DatasetError(f"The 'out_dir' argument of write_mission must be a new directory or a mission directory "
                            f"(semslam never replaces what it did not write). Got {str(out)!r} instead.")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; a mission directory is a normal one
+    with staged_output_dir(out, overwrite=True, kind="mission", option="out_dir", markers=(MARKER, "mission.json")) as tmp:
         _write_into(mission, tmp)
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-            os.replace(out, old / "previous")
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out
 
 
@@ -118,7 +101,6 @@ def _write_into(m: Dataset, d: Path) -> None:
                      "vehicle_truth": "ground_truth/vehicle.csv" if m.truth is not None else None,
                      "objects_truth": "ground_truth/objects.csv"}
     atomic_write_text(d / "mission.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
-    atomic_write_text(d / MARKER, "semslam mission\n")
     write_vehicle_toml(m.vehicle, d / "vehicle.toml")
     v = m.dvl.velocity_body_mps
     cols = [m.dvl.stamp_s, v[:, 0], v[:, 1], v[:, 2], m.dvl.valid.astype(int)]
