@@ -153,6 +153,15 @@ def test_cli_json_and_out(scene_file, tmp_path, capsys):
     written = [read_point_cloud(f) for f in payload["files"]]
     assert [c.n_points for c in written] == sizes
     assert json.loads((out / "segmentation.json").read_text())["cluster_sizes"] == sizes
+    # a second run with fewer clusters never leaves the first run's stale cluster files beside its own
+    (out / "cluster_007.pcd").write_bytes(b"stale")
+    assert main(["segment", str(scene_file), "--voxel", "0.01", "--min-cluster-size", "30", "--out", str(out),
+                 "--max-cluster-size", "0", "--json"]) == 1  # an earlier run: refused without --overwrite
+    capsys.readouterr()
+    assert main(["segment", str(scene_file), "--voxel", "0.01", "--min-cluster-size", "30", "--out", str(out),
+                 "--overwrite", "--json"]) == 0
+    capsys.readouterr()
+    assert sorted(p.name for p in out.glob("cluster_*.pcd")) == ["cluster_000.pcd", "cluster_001.pcd"]
 
 
 def test_cli_text_output(scene_file, capsys):

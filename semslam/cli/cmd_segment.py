@@ -74,8 +74,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "--out",
         metavar="DIR",
         default=None,
-        help="write cluster_NNN.pcd (largest first) and segmentation.json into DIR",
+        help="write cluster_NNN.pcd (largest first) and segmentation.json into DIR (new, or an earlier "
+             "segmentation with --overwrite: never mixed with its stale clusters)",
     )
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier semslam output in --out")
     parser.set_defaults(func=run)
 
 
@@ -120,16 +122,14 @@ def run(args: argparse.Namespace) -> int:
         **result.to_dict(),
     }
     if args.out:
-        out = Path(args.out)
-        files = []
-        for i, cluster in enumerate(result.clusters):
-            path = out / f"cluster_{i:03d}.pcd"
-            write_point_cloud(path, cluster)
-            files.append(str(path))
-        payload["files"] = files
-        atomic_write_text(
-            out / "segmentation.json", json.dumps(to_jsonable(payload), indent=2) + "\n"
-        )
+        from .._outdir import staged_output_dir
+
+        final = Path(args.out)
+        payload["files"] = [str(final / f"cluster_{i:03d}.pcd") for i in range(len(result.clusters))]
+        with staged_output_dir(final, overwrite=args.overwrite, kind="segmentation") as out:
+            for i, cluster in enumerate(result.clusters):
+                write_point_cloud(out / f"cluster_{i:03d}.pcd", cluster)
+            atomic_write_text(out / "segmentation.json", json.dumps(to_jsonable(payload), indent=2) + "\n")
     emit(args, payload, lambda: _text(payload))
     return 0
 
