@@ -83,6 +83,12 @@ class Detection:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Detection":
+        if not isinstance(d, dict):
+            raise InputError(f"A detection record must be a JSON object. Got {type(d).__name__} instead.")
+        if not isinstance(d.get("reliable", True), bool):  # "false" would be truthy
+            raise InputError(f"A detection record's 'reliable' must be true or false. Got {d.get('reliable')!r} instead.")
+        if not isinstance(d.get("label"), str):
+            raise InputError(f"A detection record's 'label' must be a string. Got {d.get('label')!r} instead.")
         try:
             return cls(
                 label=d["label"],
@@ -93,7 +99,7 @@ class Detection:
                 fitness=_unnum(d.get("fitness")),
                 rmse_m=_unnum(d.get("rmse_m")),
                 n_points=int(d.get("n_points", 0)),
-                reliable=bool(d.get("reliable", True)),
+                reliable=d.get("reliable", True),
                 stamp_s=_unnum(d.get("stamp_s")),
                 scan_id=int(d.get("scan_id", -1)),
                 extras=dict(d.get("extras", {})),

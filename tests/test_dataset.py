@@ -311,3 +311,42 @@ def test_mission_log_errors_name_the_file(sim_mission, tmp_path):
     (d / "ahrs.csv").write_text("\n".join(rows) + "\n")
     with pytest.raises(DatasetError, match=r"ahrs.csv.*finite stamps"):
         read_mission(d)
+
+
+def test_far_future_and_early_messages_are_skipped_and_counted():
+    """A detection stamped 10^9 s in the future used to make the filter predict for hours; a DVL sample before
+    the start was dropped without a word. Now: skipped, counted in the metrics, the run unchanged."""
+    import time as _time
+
+    from semslam.detection import Detection
+
+    ds = numpy_dive(duration_s=5.0)
+    base = run_slam(ds, {}, mode="pose", config=SlamConfig().updated(perturb_initial_position=False))
+    det = Detection("elbow", 0.1, RigidTransform.from_xyz_rpy([0, 0, 1.0], [0, 0, 0]), np.eye(6) * 1e-4,
+                    stamp_s=1e9, scan_id=0)
+    t = _time.perf_counter()
+    res = run_slam(ds, {0: [det]}, mode="pose", config=SlamConfig().updated(perturb_initial_position=False))
+    assert _time.perf_counter() - t < 30
+    assert res.metrics["skipped_beyond_attitude"] == 1
+    np.testing.assert_array_equal(res.position_ned_m, base.position_ned_m)
+    s = SlamSession(ds.vehicle, mode="dr", start_stamp_s=1.0)
+    s.add_dvl(0.5, [0.2, 0, 0])
+    s.add_depth(0.6, 3.0)
+    s.add_attitude(1.0, [0, 0, 0])
+    s.add_attitude(2.0, [0, 0, 0])
+    assert s.finish().metrics["skipped_before_start"] == 2
+
+
+def test_detection_records_are_typed_strictly():
+    """'reliable': "false" was read as true (a truthy string)."""
+    from semslam.detection import Detection
+    from semslam.errors import InputError
+
+    good = Detection("elbow", 0.1, RigidTransform.identity(), np.eye(6), stamp_s=1.0).to_dict()
+    assert Detection.from_dict(good).reliable is True
+    for key, value, words in (("reliable", "false", "'reliable' must be true or false"),
+                              ("label", 3, "'label' must be a string")):
+        with pytest.raises(InputError, match=words):
+            Detection.from_dict({**good, key: value})
+    with pytest.raises(InputError, match="JSON object"):
+        Detection.from_dict([1, 2])

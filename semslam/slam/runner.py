@@ -104,8 +104,6 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
     add = {"attitude": session.add_attitude, "dvl": lambda t, v, ok, r: session.add_dvl(t, v, valid=ok, beam_range_m=r),
            "depth": session.add_depth, "detections": session.add_detections}
     for t, kind, payload in merged_messages(dataset, (detections_by_scan or {}) if mode != "dr" else {}):
-        if kind in ("dvl", "depth") and t < t0:
-            continue
         add[kind](t, *payload)
     return evaluate_run(session.finish(), dataset, symmetries)
 

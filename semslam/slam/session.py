@@ -42,6 +42,8 @@ from .sensors import AttitudeInput, DepthModel, DvlModel, SensorGate
 from .smoother import RtsRecorder
 
 _ORDER = {"dvl": 1, "depth": 2, "detections": 3}
+#: at finish, a message later than the last attitude sample by more than this is skipped (counted in the metrics)
+MAX_ATTITUDE_EXTRAPOLATION_S = 1.0
 
 
 class SlamSession:
@@ -101,6 +103,7 @@ class SlamSession:
         self._H: dict[str, list] = {k: [] for k in ("t", "p", "Pp", "v", "Pv", "b", "bv", "c", "rpy")}
         self._next_hist = 0
         self._finished = False
+        self._before_start = 0  #: DVL and depth samples before the start stamp (ignored, counted)
 
     # ------------------------------------------------------------------ set-up
     def _start(self, stamp_s: float) -> None:
@@ -185,6 +188,8 @@ class SlamSession:
         self._t_end = max(self._t_end, t)
         if t >= self._t0:
             self._push(t, "dvl", (bool(valid), v, r))
+        else:
+            self._before_start += 1
 
     def add_depth(self, stamp_s: float, depth_m: float) -> None:
         """Pressure depth (m, positive down)."""
@@ -193,6 +198,8 @@ class SlamSession:
         self._t_end = max(self._t_end, t)
         if t >= self._t0:
             self._push(t, "depth", z)
+        else:
+            self._before_start += 1
 
     def add_detections(self, stamp_s: float, detections: list[Detection]) -> None:
         """Detections made at ``stamp_s`` (poses in the scanner frame); ignored in ``dr`` mode."""
@@ -208,6 +215,11 @@ class SlamSession:
         covered = math.inf if final else self.attitude.last_stamp_s
         while self._pending and self._pending[0][0] <= covered:
             t, _, _, kind, payload = heapq.heappop(self._pending)
+            if t > self.attitude.last_stamp_s + MAX_ATTITUDE_EXTRAPOLATION_S:
+                # at finish, beyond the last attitude: the filter has no input to predict with (and a stamp far in
+                # the future would make it predict for hours). Skipped and counted, never silently.
+                self._log(stamp_s=t, kind=f"{kind}_beyond_attitude", accepted=False)
+                continue
             self._history_before(t)
             self._predict_to(t)
             if kind == "dvl":
@@ -298,7 +310,7 @@ class SlamSession:
         if self._finished:
             raise SlamError("SlamSession.finish was already called.")
         self._drain(final=True)
-        self._history_before(self._t_end + 1e-9)
+        self._history_before(min(self._t_end, self.attitude.last_stamp_s + MAX_ATTITUDE_EXTRAPOLATION_S) + 1e-9)
         self._finished = True
         return self._result()
 
@@ -324,6 +336,8 @@ class SlamSession:
         metrics["dvl_degraded"] = sum(r["kind"] == "dvl" and r.get("reason") == "degraded" for r in log)
         metrics["dvl_maneuver_resets"] = sum(r["kind"] == "dvl" and r.get("reason") == "maneuver" for r in log)
         metrics["dvl_dropouts"] = sum(r["kind"] == "dvl_dropout" for r in log)
+        metrics["skipped_beyond_attitude"] = sum(r["kind"].endswith("_beyond_attitude") for r in log)
+        metrics["skipped_before_start"] = self._before_start
         sm = None
         if ekf.recorder is not None:
             sm = ekf.recorder.smooth(ekf)
