@@ -78,3 +78,22 @@ def _one_line_error(capsys) -> str:
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("semslam: error:"), lines
     return lines[0]
+
+
+def test_fifo_and_devices_are_refused_at_once(tmp_path, capsys):
+    """A FIFO hung `info`/`segment` forever, /dev/urandom read without end, /dev/zero read 7.4 GB: a point-cloud
+    path must be a regular file (after symlinks)."""
+    import os
+
+    import pytest
+
+    if not hasattr(os, "mkfifo") or not os.path.exists("/dev/urandom"):
+        pytest.skip("needs os.mkfifo and /dev/urandom")
+    os.mkfifo(tmp_path / "f.pcd")
+    (tmp_path / "r.pcd").symlink_to("/dev/urandom")
+    (tmp_path / "z.npy").symlink_to("/dev/zero")
+    for name in ("f.pcd", "r.pcd", "z.npy"):
+        for cmd in ("info", "segment"):
+            assert main([cmd, str(tmp_path / name)]) == 1
+            lines = capsys.readouterr().err.splitlines()
+            assert len(lines) == 1 and name in lines[0] and "not a regular file" in lines[0], lines

@@ -39,6 +39,23 @@ def _suffix(path: str | os.PathLike) -> str:
     return suffix
 
 
+def check_regular_file(path: Path) -> None:
+    """A point-cloud path must be a regular file (after symlinks): a FIFO, a device such as /dev/urandom or
+    /dev/zero, or a socket would block or never end. Raises :class:`PcdError` naming the file."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise PcdError(f"Cannot read point-cloud file '{path}': no such file.") from None
+    except OSError as exc:
+        raise PcdError(f"Cannot read point-cloud file '{path}': {exc.strerror or exc}.") from None
+    if stat.S_ISDIR(mode):
+        raise PcdError(f"Cannot read point-cloud file '{path}': it is a directory.")
+    if not stat.S_ISREG(mode):
+        raise PcdError(f"Cannot read point-cloud file '{path}': it is not a regular file (a FIFO, device or socket).")
+
+
 def read_point_cloud(
     path: str | os.PathLike, *, drop_nan: bool = True, frame_id: str = "sensor"
 ) -> PointCloud:
@@ -67,6 +84,7 @@ def read_point_cloud(
         Unknown suffix, missing/unreadable/corrupted file; the message names the file.
     """
     suffix = _suffix(path)
+    check_regular_file(Path(path))
     if suffix == ".pcd":
         return read_pcd(path).to_point_cloud(drop_nan=drop_nan, frame_id=frame_id)
     from . import ply

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,10 +19,11 @@ def describe_file(path: str | os.PathLike) -> dict[str, Any]:
     PCD header, padding included), ``viewpoint`` (``xyz_m``, ``quat_wxyz``), ``bounds`` (``min_xyz_m``,
     ``max_xyz_m`` of the valid points, None when there are none).
     """
-    from . import _suffix
+    from . import _suffix, check_regular_file
     from .pcd import read_pcd
 
     suffix = _suffix(path)
+    check_regular_file(Path(path))
     if suffix == ".pcd":
         data = read_pcd(path)
         fields = [

@@ -250,10 +250,9 @@ def _dtype_key(dtype: np.dtype, name: str, where: str) -> tuple[str, int]:
 
 
 def _read_bytes(path: Path) -> bytes:
-    if not path.exists():
-        raise PcdError(f"Cannot read point-cloud file '{path}': no such file.")
-    if path.is_dir():
-        raise PcdError(f"Cannot read point-cloud file '{path}': it is a directory.")
+    from . import check_regular_file
+
+    check_regular_file(path)
     try:
         with open(path, "rb") as fh:
             return fh.read()

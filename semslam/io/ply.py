@@ -26,10 +26,9 @@ _PLY_DTYPES = ("i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8")
 
 
 def _check_file(path: Path) -> None:
-    if not path.exists():
-        raise PcdError(f"Cannot read point-cloud file '{path}': no such file.")
-    if path.is_dir():
-        raise PcdError(f"Cannot read point-cloud file '{path}': it is a directory.")
+    from . import check_regular_file
+
+    check_regular_file(path)
     if path.stat().st_size == 0:
         raise PcdError(f"Cannot read point-cloud file '{path}': the file is empty.")
 
