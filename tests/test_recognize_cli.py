@@ -86,3 +86,10 @@ def test_recognize_config_file_is_read_and_checked(scene, cache, tmp_path, capsy
         assert main(["recognize", str(scene), "--db", "builtin", "--config", str(cfg)]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0] and str(cfg) in err[0], err
+
+
+def test_out_naming_a_directory_fails_before_the_work(scene, tmp_path, capsys):
+    """`--out` naming a directory raised IsADirectoryError after the whole run; now one line, at once."""
+    assert main(["recognize", str(scene), "--db", "builtin", "--out", str(tmp_path)]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "'--out'" in lines[0] and str(tmp_path) in lines[0]

@@ -81,6 +81,9 @@ def format_result(payload: dict) -> str:
 def run(args: argparse.Namespace) -> int:
     import json
     import time
+    from pathlib import Path
+
+    from ..errors import InputError
 
     from .._atomic import atomic_write_text
     from ..io import read_point_cloud
@@ -89,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
     from ..simulation.builtin_db import builtin_database
     from ._output import emit, to_jsonable
 
+    if args.out and Path(args.out).is_dir():  # say so before the work, not after it
+        raise InputError(f"The '--out' option must name a file to write. Got the directory {args.out!r} instead.")
     t0 = time.perf_counter()
     db = builtin_database(seed=0) if args.db == "builtin" else load_database(args.db)
     t_db = (time.perf_counter() - t0) * 1e3
