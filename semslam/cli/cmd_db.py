@@ -6,6 +6,8 @@
   Kinect-like camera (``--n-views`` per object), by default in the survey geometry (75 degrees, 1.5 m),
   plus ``--model-views`` pose-model views per object (default 8 at 60 degrees, 0.7 m: less noise, more
   of the sides) that pose estimation fuses instead of the recognition views.
+* ``semslam db build --models MODELS_DIR --out DB.npz``: your CAD models (STL, OBJ, PLY and a
+  ``models.toml``, see :mod:`semslam.simulation.cad_models`) seen by the same camera, with the same options.
 * ``semslam db info DB.npz``: classes, views per class, symmetry, size, descriptor settings, file version.
 """
 
@@ -27,19 +29,22 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     src.add_argument("views_dir", nargs="?", metavar="VIEWS_DIR", help="folder CLASS/VIEW.{pcd,ply,npy}")
     src.add_argument("--builtin", action="store_true",
                      help="the four built-in objects acquired by the simulated Kinect-like camera")
+    src.add_argument("--models", metavar="MODELS_DIR",
+                     help="your CAD models (STL, OBJ, PLY + models.toml: file, unit, symmetry, T_mesh_object per "
+                          "class) acquired by the simulated Kinect-like camera")
     build.add_argument("--out", required=True, metavar="DB", help="database file to write (.npz)")
-    build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin (default 8)")
+    build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin/--models (default 8)")
     build.add_argument("--kinect-elevation", type=float, default=75.0, metavar="DEG",
-                       help="camera elevation of the --builtin views, degrees (default 75: the survey geometry; "
+                       help="camera elevation of the --builtin/--models views, degrees (default 75: the survey geometry; "
                             "the papers used 45)")
     build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
-                       help="camera distance of the --builtin views, metres (default 1.5; the papers ~0.7)")
+                       help="camera distance of the --builtin/--models views, metres (default 1.5; the papers ~0.7)")
     build.add_argument("--model-views", type=int, default=8, metavar="N",
-                       help="pose-model views per object with --builtin (default 8; 0: pose uses the recognition views)")
+                       help="pose-model views per object with --builtin/--models (default 8; 0: pose uses the recognition views)")
     build.add_argument("--model-elevation", type=float, default=60.0, metavar="DEG",
-                       help="camera elevation of the --builtin pose-model views, degrees (default 60)")
+                       help="camera elevation of the --builtin/--models pose-model views, degrees (default 60)")
     build.add_argument("--model-distance", type=float, default=0.7, metavar="M",
-                       help="camera distance of the --builtin pose-model views, metres (default 0.7)")
+                       help="camera distance of the --builtin/--models pose-model views, metres (default 0.7)")
     build.add_argument("--voxel", type=float, default=0.005, metavar="M",
                        help="voxel grid applied to views and queries before the descriptors, metres; 0 disables "
                             "(default 0.005, the segmentation's grid)")
@@ -90,14 +95,47 @@ def run_build(args: argparse.Namespace) -> int:
             kwargs["model_views"], _ = builtin_view_clouds(seed=args.seed, n_views=args.model_views, config=model_kinect)
         db = build_database(views, classes, **kwargs)
         source = "builtin"
+    elif args.models is not None:
+        db, warned = _build_from_models(args, kwargs)
+        source = str(args.models)
     else:
         db = build_database_from_folder(args.views_dir, **kwargs)
         source = str(args.views_dir)
     path = save_database(db, args.out)
     payload = {"path": str(path), "source": source, "seconds": round(time.perf_counter() - t0, 3), **db.summary()}
+    if args.models is not None:
+        payload["warnings"] = warned
     emit(args, payload, lambda: f"wrote {path}: {db.n_views} views of {len(db.classes)} classes "
                                 f"({', '.join(db.classes)}) in {payload['seconds']:.1f} s")
     return 0
+
+
+def _build_from_models(args: argparse.Namespace, kwargs: dict):
+    """``--models``: the database and the models' warnings (each also printed as one stderr line)."""
+    import math
+    import sys
+    import warnings
+
+    from ..errors import InputError
+    from ..simulation.cad_models import build_models_database
+    from ..simulation.config import KinectConfig
+
+    if args.model_views < 0:
+        raise InputError(f"The '--model-views' option must be >= 0. Got {args.model_views} instead.")
+    kinect = KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance)
+    model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        db = build_models_database(args.models, n_views=args.n_views, n_model_views=args.model_views, kinect=kinect,
+                                   model_kinect=model_kinect, **kwargs)
+    warned = []
+    for w in caught:
+        if issubclass(w.category, UserWarning):
+            warned.append(str(w.message))
+            print(f"semslam: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return db, warned
 
 
 def format_summary(summary: dict, path: str) -> str:
