@@ -16,6 +16,16 @@ from __future__ import annotations
 import argparse
 
 
+def _length_or_auto(value: str):
+    """A length in metres, or 'auto' (from the views' measured point spacing)."""
+    if value == "auto":
+        return value
+    try:
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of metres or 'auto', got {value!r}") from None
+
+
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     parser = subparsers.add_parser("db", parents=[common], help="build or describe a recognition view database",
                                    description="Build or describe a recognition view database (.npz).")
@@ -45,12 +55,14 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                        help="camera elevation of the --builtin/--models pose-model views, degrees (default 60)")
     build.add_argument("--model-distance", type=float, default=0.7, metavar="M",
                        help="camera distance of the --builtin/--models pose-model views, metres (default 0.7)")
-    build.add_argument("--voxel", type=float, default=0.005, metavar="M",
-                       help="voxel grid applied to views and queries before the descriptors, metres; 0 disables "
-                            "(default 0.005, the segmentation's grid)")
+    build.add_argument("--voxel", type=_length_or_auto, default=0.005, metavar="M|auto",
+                       help="voxel grid applied to views and queries before the descriptors, metres, or auto "
+                            "(0.9 x the views' measured point spacing); 0 disables (default 0.005, the "
+                            "segmentation's grid)")
     build.add_argument("--seed", type=int, default=0, help="seed of the simulated views and of ESF (default 0)")
-    build.add_argument("--normal-radius", type=float, default=0.015, metavar="M",
-                       help="normal-estimation radius for the VFH, metres (default 0.015)")
+    build.add_argument("--normal-radius", type=_length_or_auto, default=0.015, metavar="M|auto",
+                       help="normal-estimation radius for the VFH, metres, or auto (3 voxels of the measured "
+                            "spacing; default 0.015)")
     build.add_argument("--vfh-variant", default=None, help="VFH binning variant (default: the descriptors' default)")
     build.add_argument("--esf-samples", type=int, default=20000, help="ESF point-triplet samples (default 20000)")
     build.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -76,7 +88,8 @@ def run_build(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     kwargs = {"vfh_variant": args.vfh_variant, "normal_radius_m": args.normal_radius,
-              "esf_n_samples": args.esf_samples, "voxel_leaf_m": args.voxel if args.voxel > 0 else None,
+              "esf_n_samples": args.esf_samples,
+              "voxel_leaf_m": args.voxel if args.voxel == "auto" or args.voxel > 0 else None,
               "seed": args.seed, "progress": args.progress}
     if args.builtin:
         import math

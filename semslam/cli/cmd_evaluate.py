@@ -31,7 +31,9 @@ def run(args: argparse.Namespace) -> int:
     from ._output import emit
 
     source = Path(args.source)
-    db = build_database_from_folder(source, seed=args.seed) if source.is_dir() else load_database(source)
+    # a folder of views in any unit or from any sensor: grid and normal radius from their measured point spacing
+    db = (build_database_from_folder(source, seed=args.seed, normal_radius_m="auto", voxel_leaf_m="auto")
+          if source.is_dir() else load_database(source))
     result = leave_one_out(db, descriptor=args.descriptor, classifier=args.classifier, seed=args.seed,
                            n_jobs=args.jobs)
     emit(args, {"source": str(source), **result.to_dict()}, result.format_table)

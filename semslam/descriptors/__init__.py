@@ -1,4 +1,5 @@
-"""Point-cloud descriptors as PCL computes them: normals, FPFH (per point), ESF and VFH (global).
+"""Point-cloud descriptors as PCL computes them: normals, FPFH (per point), ESF and VFH (global),
+plus the measured point spacing that makes their settings scale-free.
 
 See /work/shared/design/pcl-algorithms.md for the PCL behaviour reproduced here.
 """
@@ -7,6 +8,7 @@ from .esf import ESF_SIZE, compute_esf, glibc_rand
 from .fpfh import compute_fpfh, compute_spfh
 from .neighbors import Neighborhoods, find_neighbors
 from .normals import NormalsResult, estimate_normals
+from .spacing import point_spacing_m
 from .vfh import VFH_SIZE, VFH_VARIANTS, compute_vfh
 
 __all__ = [
@@ -22,4 +24,5 @@ __all__ = [
     "estimate_normals",
     "find_neighbors",
     "glibc_rand",
+    "point_spacing_m",
 ]

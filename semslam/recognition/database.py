@@ -60,6 +60,24 @@ POINT_FILE_SUFFIXES = (".pcd", ".ply", ".npy")
 DEFAULT_VOXEL_LEAF_M = 0.005
 #: Normal radius of the VFH: 3 voxels of the default grid (0.01 leaves edge points with too few neighbours).
 DEFAULT_NORMAL_RADIUS_M = 0.015
+#: ``normal_radius_m="auto"`` / ``voxel_leaf_m="auto"``: lengths measured on the views instead of fixed ones.
+AUTO = "auto"
+#: The "auto" lengths in units of the measured spacing ``s`` (the median over views of each view's
+#: :func:`~semslam.descriptors.point_spacing_m`, median distance to the 4th nearest neighbour, raw points):
+#: ``voxel_leaf_m = AUTO_VOXEL_FACTOR * s`` and ``normal_radius_m = AUTO_NORMAL_FACTOR * max(AUTO_VOXEL_FACTOR * s,
+#: voxel_leaf_m)`` (3 voxels of the grid, as the fixed defaults). On the built-in Kinect views (survey
+#: geometry) s = 5.59 mm, which gives a 5.03 mm grid and a 15.1 mm normal radius (fixed: 5 mm and 15 mm).
+AUTO_SPACING_K = 4
+AUTO_VOXEL_FACTOR = 0.9
+AUTO_NORMAL_FACTOR = 3.0
+#: With ``normal_radius_m="auto"`` the VFH is computed on points and viewpoint scaled by ``vfh_scale =
+#: AUTO_REFERENCE_SPACING_M / s``: PCL's VFH (variants ``pcl-1.13``, ``pcl-1.8``) normalises its view direction
+#: as the 4-vector ``(vp - c, -1)``, so its viewpoint part depends on the length unit (a view in millimetres
+#: would get another histogram). The reference is the built-in views' spacing, whose ``vfh_scale`` is ~1.
+AUTO_REFERENCE_SPACING_M = 0.0056
+AUTO_RULE = (f"spacing_m = median over views of point_spacing_m(k={AUTO_SPACING_K}); voxel_leaf_m = "
+             f"{AUTO_VOXEL_FACTOR} x spacing_m; normal_radius_m = {AUTO_NORMAL_FACTOR} x max({AUTO_VOXEL_FACTOR} x "
+             f"spacing_m, voxel_leaf_m); vfh_scale = {AUTO_REFERENCE_SPACING_M} / spacing_m (auto normal radius)")
 
 __all__ = [
     "FORMAT_NAME",
@@ -71,6 +89,7 @@ __all__ = [
     "build_database_from_folder",
     "compute_view_descriptors",
     "load_database",
+    "resolve_descriptor_lengths",
     "save_database",
 ]
 
@@ -135,7 +154,9 @@ class ViewDatabase:
     class_infos : dict of str to ClassInfo
     params : dict
         How the descriptors were computed (``vfh_variant``, ``normal_radius_m``, ``esf_n_samples``,
-        ``voxel_leaf_m`` -- absent or None in databases built without a voxel grid --, ``seed``).
+        ``voxel_leaf_m`` -- absent or None in databases built without a voxel grid --, ``seed``); with
+        ``"auto"`` lengths also ``spacing_m``, ``vfh_scale``, ``auto`` (which lengths were auto) and ``auto_rule``
+        (the lengths themselves are stored resolved, in the views' unit).
     model_labels : ndarray of str, shape (M,)
         Class of every pose-model view (M may be 0; see :meth:`pose_views`).
     model_point_offsets : ndarray of int64, shape (M + 1,)
@@ -245,13 +266,15 @@ class ViewDatabase:
 
         The database's voxel grid (``params["voxel_leaf_m"]``, if any) is applied to the query first, so
         that queries and views have the same point density (a cluster already on that grid, as
-        :func:`~semslam.segmentation.segment_scene` outputs it, changes little).
+        :func:`~semslam.segmentation.segment_scene` outputs it, changes little). A database built with
+        ``"auto"`` lengths describes queries with its resolved lengths and ``vfh_scale`` (``params``): queries
+        must be in the views' unit.
         """
         return compute_view_descriptors(
             cloud, vfh_variant=self.params.get("vfh_variant"),
             normal_radius_m=self.params.get("normal_radius_m", DEFAULT_NORMAL_RADIUS_M),
             esf_n_samples=self.params.get("esf_n_samples", 20000), voxel_leaf_m=self.params.get("voxel_leaf_m"),
-            seed=seed, concurrent=concurrent)
+            seed=seed, concurrent=concurrent, vfh_scale=self.params.get("vfh_scale", 1.0))
 
     def subset(self, indices: Any) -> ViewDatabase:
         """A database with the given views only (order kept); classes without views are dropped."""
@@ -325,10 +348,78 @@ def _vfh_default_variant() -> str:
     return str(p.default) if p is not None and p.default is not inspect.Parameter.empty else "default"
 
 
+def _is_auto(value: Any) -> bool:
+    return isinstance(value, str) and value == AUTO
+
+
+def resolve_descriptor_lengths(clouds: Sequence[PointCloud] | PointCloud, *,
+                               normal_radius_m: float | str = AUTO, voxel_leaf_m: float | str | None = AUTO,
+                               caller: str = "resolve_descriptor_lengths") -> dict[str, Any]:
+    """The normal radius and voxel leaf the descriptors of ``clouds`` use, with ``"auto"`` resolved.
+
+    ``"auto"`` lengths come from the measured spacing of the clouds (see :data:`AUTO_RULE`): ``spacing_m``
+    is the median over the clouds of :func:`~semslam.descriptors.point_spacing_m` (k = 4, seed 0, on the
+    raw points; clouds with fewer than 5 points are left out), ``voxel_leaf_m = 0.9 x spacing_m`` and
+    ``normal_radius_m = 3 x max(0.9 x spacing_m, voxel_leaf_m)`` (3 voxels). Both scale with the data, so a
+    database in millimetres, or from a sparser sensor, gets the same descriptors as one in metres. With an
+    ``"auto"`` normal radius the VFH is also computed in a unit where the spacing is
+    :data:`AUTO_REFERENCE_SPACING_M` (``vfh_scale``): PCL's VFH viewpoint part depends on the unit.
+
+    Returns
+    -------
+    dict
+        ``normal_radius_m`` (float), ``voxel_leaf_m`` (float or None), ``vfh_scale`` (float, 1.0 unless the
+        normal radius is "auto") and, when a length was ``"auto"``, ``spacing_m`` (float) and ``auto_rule``
+        (str): what :func:`build_database` records.
+
+    Raises
+    ------
+    InputError
+        A length that is neither a positive number nor ``"auto"`` (``voxel_leaf_m`` may also be None).
+    DatabaseError
+        ``"auto"`` but no cloud with at least 5 distinct points to measure a spacing on.
+    """
+    from ..descriptors import point_spacing_m
+
+    auto_radius, auto_leaf = _is_auto(normal_radius_m), _is_auto(voxel_leaf_m)
+    radius = None if auto_radius else _check_length("normal_radius_m", normal_radius_m, caller)
+    leaf = None if auto_leaf or voxel_leaf_m is None else _check_length("voxel_leaf_m", voxel_leaf_m, caller)
+    if not (auto_radius or auto_leaf):
+        return {"normal_radius_m": radius, "voxel_leaf_m": leaf, "vfh_scale": 1.0}
+    clouds = [clouds] if isinstance(clouds, PointCloud) else list(clouds)
+    spacings = []
+    for cloud in clouds:
+        if cloud.n_points > AUTO_SPACING_K:
+            try:
+                spacings.append(point_spacing_m(cloud.points_xyz_m, k=AUTO_SPACING_K, seed=0))
+            except SemslamError:
+                pass  # a view of duplicated points has no spacing: the others decide
+    if not spacings:
+        raise DatabaseError(f"{caller} cannot measure a point spacing for the 'auto' lengths: no view has at "
+                            f"least {AUTO_SPACING_K + 1} distinct points. Give 'normal_radius_m' and "
+                            f"'voxel_leaf_m' as lengths.")
+    spacing = float(np.median(spacings))
+    if auto_leaf:
+        leaf = AUTO_VOXEL_FACTOR * spacing
+    if auto_radius:
+        radius = AUTO_NORMAL_FACTOR * max(AUTO_VOXEL_FACTOR * spacing, leaf or 0.0)
+    return {"normal_radius_m": float(radius), "voxel_leaf_m": None if leaf is None else float(leaf),
+            "vfh_scale": AUTO_REFERENCE_SPACING_M / spacing if auto_radius else 1.0,
+            "spacing_m": spacing, "auto_rule": AUTO_RULE}
+
+
+def _check_length(name: str, value: Any, caller: str) -> float:
+    if isinstance(value, str):
+        raise InputError(f"The {name!r} argument of {caller} must be a number of metres > 0 or {AUTO!r}. "
+                         f"Got {value!r} instead.")
+    return check_positive(name, value, caller=caller)
+
+
 def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = None,
-                             normal_radius_m: float = DEFAULT_NORMAL_RADIUS_M,
-                             esf_n_samples: int = 20000, voxel_leaf_m: float | None = None,
-                             seed: int | np.random.Generator = 0, concurrent: bool = True) -> ViewDescriptors:
+                             normal_radius_m: float | str = DEFAULT_NORMAL_RADIUS_M,
+                             esf_n_samples: int = 20000, voxel_leaf_m: float | str | None = None,
+                             seed: int | np.random.Generator = 0, concurrent: bool = True,
+                             vfh_scale: float | None = None) -> ViewDescriptors:
     """ESF and VFH of one view, as stored in the database.
 
     ``concurrent``: normals + VFH on a helper thread while this one computes ESF (~5 % less per cluster on a
@@ -349,24 +440,34 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
         ESF and VFH do not depend on the frame, VFH's viewpoint part only on the viewpoint relative to it).
     vfh_variant : str, optional
         Passed to ``compute_vfh(variant=...)``; None uses its default.
-    normal_radius_m : float
+    normal_radius_m : float or "auto"
+        Metres; ``"auto"``: from this cloud's measured spacing (:func:`resolve_descriptor_lengths`).
     esf_n_samples : int
-    voxel_leaf_m : float, optional
-        Voxel edge (metres) of the grid applied before both descriptors; None keeps every point.
+    voxel_leaf_m : float or "auto", optional
+        Voxel edge (metres) of the grid applied before both descriptors; None keeps every point;
+        ``"auto"``: from this cloud's measured spacing. (A database query must use the database's
+        resolved values instead: :meth:`ViewDatabase.describe` does.)
     seed : int or Generator
         Seeds ESF's random sampling.
+    vfh_scale : float, optional
+        Points and viewpoint are multiplied by it before the VFH (after the normals): the unit of PCL's
+        VFH viewpoint part, the one length-dependent part of ESF and VFH. None: 1 with a length normal
+        radius, the measured one with ``"auto"`` (:data:`AUTO_REFERENCE_SPACING_M`).
     """
     from .. import descriptors
 
     if not isinstance(cloud, PointCloud):
         raise InputError(f"The 'cloud' argument of compute_view_descriptors must be a PointCloud. "
                          f"Got {type(cloud).__name__} instead.")
-    radius = check_positive("normal_radius_m", normal_radius_m, caller="compute_view_descriptors")
+    lengths = resolve_descriptor_lengths(cloud, normal_radius_m=normal_radius_m, voxel_leaf_m=voxel_leaf_m,
+                                         caller="compute_view_descriptors")
+    radius, leaf = lengths["normal_radius_m"], lengths["voxel_leaf_m"]
+    scale = lengths["vfh_scale"] if vfh_scale is None else check_positive("vfh_scale", vfh_scale,
+                                                                           caller="compute_view_descriptors")
     pts = cloud.points_xyz_m
-    if voxel_leaf_m is not None:
+    if leaf is not None:
         from ..segmentation.voxel import voxel_downsample
 
-        leaf = check_positive("voxel_leaf_m", voxel_leaf_m, caller="compute_view_descriptors")
         pts = voxel_downsample(pts, leaf)
         if len(pts) < 3:
             raise DatabaseError(f"The cloud has {len(pts)} point(s) left after the {leaf} m voxel grid: "
@@ -376,7 +477,16 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
     def normals_and_vfh() -> np.ndarray:
         normals = descriptors.estimate_normals(pts, radius_m=radius, viewpoint_xyz_m=cloud.viewpoint_xyz_m).normals_xyz
         ok = np.isfinite(normals).all(axis=1)
-        return descriptors.compute_vfh(pts[ok], normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m, **kwargs)
+        if np.count_nonzero(ok) < 2:
+            from ..errors import DescriptorError
+
+            raise DescriptorError(f"Only {np.count_nonzero(ok)} of the {len(pts)} points have a normal within "
+                                  f"normal_radius_m={radius:g} (3 neighbours needed): the radius is too small for "
+                                  f"the points' spacing (are they in metres?). Use normal_radius_m='auto'.")
+        if scale == 1.0:
+            return descriptors.compute_vfh(pts[ok], normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m, **kwargs)
+        return descriptors.compute_vfh(pts[ok] * scale, normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m * scale,
+                                       **kwargs)
 
     if not concurrent:
         esf = descriptors.compute_esf(pts, n_samples=int(esf_n_samples), seed=seed)
@@ -414,8 +524,8 @@ def _helper_thread() -> ThreadPoolExecutor:
 # -- building ------------------------------------------------------------------------------------
 
 def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mapping[str, Mapping[str, Any]], *,
-                   vfh_variant: str | None = None, normal_radius_m: float = DEFAULT_NORMAL_RADIUS_M,
-                   esf_n_samples: int = 20000, voxel_leaf_m: float | None = DEFAULT_VOXEL_LEAF_M,
+                   vfh_variant: str | None = None, normal_radius_m: float | str = DEFAULT_NORMAL_RADIUS_M,
+                   esf_n_samples: int = 20000, voxel_leaf_m: float | str | None = DEFAULT_VOXEL_LEAF_M,
                    seed: int | np.random.Generator = 0, progress: bool = False,
                    model_views: Sequence[tuple[str, str, PointCloud]] | None = None) -> ViewDatabase:
     """Compute the descriptors of partial views and gather them in a :class:`ViewDatabase`.
@@ -429,14 +539,21 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         One entry for every label in ``views`` (extra entries are an error too).
     vfh_variant : str, optional
         VFH binning variant passed to ``compute_vfh``; None = its default (the name is recorded).
-    normal_radius_m : float, default DEFAULT_NORMAL_RADIUS_M
-        Radius of the normal estimation for the VFH, metres (3 voxels of the default grid).
+    normal_radius_m : float or "auto", default DEFAULT_NORMAL_RADIUS_M (0.015)
+        Radius of the normal estimation for the VFH, metres (3 voxels of the default grid). ``"auto"``:
+        3 voxels of the auto grid (2.7 x the views' measured point spacing, or 3 x a larger fixed
+        ``voxel_leaf_m``), and the VFH computed in a spacing-based unit (``vfh_scale``), see
+        :func:`resolve_descriptor_lengths`: for views in another unit or from another sensor.
     esf_n_samples : int, default 20000
         Point triplets sampled by ESF (PCL's value).
-    voxel_leaf_m : float or None, default DEFAULT_VOXEL_LEAF_M (0.005)
+    voxel_leaf_m : float, "auto" or None, default DEFAULT_VOXEL_LEAF_M (0.005)
         Voxel grid applied to every view before its descriptors, and recorded so that
         :meth:`ViewDatabase.describe` applies it to queries: the segmentation's default grid, so that
         laser clusters and Kinect views have the same density. None keeps the raw views (the papers).
+        ``"auto"``: 0.9 x the views' measured point spacing. The resolved lengths are recorded in
+        ``params`` (floats, with ``spacing_m``, ``vfh_scale``, ``auto`` and ``auto_rule``), so queries are described the same way;
+        queries must then come at the views' scale and density (a laser cluster on the segmentation's
+        5 mm grid matches a database built with the fixed 5 mm grid, not with "auto" on dense views).
     seed : int or Generator, default 0
         Every view's ESF gets its own seed drawn from it: the database is reproducible.
     progress : bool or callable
@@ -447,9 +564,11 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         Classes without any keep their recognition views as pose model.
     """
     caller = "build_database"
-    radius = check_positive("normal_radius_m", normal_radius_m, caller=caller)
+    if not _is_auto(normal_radius_m):  # lengths checked before the views; "auto" is measured once they are
+        _check_length("normal_radius_m", normal_radius_m, caller)
+    if not (_is_auto(voxel_leaf_m) or voxel_leaf_m is None):
+        _check_length("voxel_leaf_m", voxel_leaf_m, caller)
     n_samples = check_int("esf_n_samples", esf_n_samples, caller=caller, minimum=1)
-    leaf = None if voxel_leaf_m is None else check_positive("voxel_leaf_m", voxel_leaf_m, caller=caller)
     rng = as_rng(seed, caller=caller)
     views = list(views)
     if not views:
@@ -461,6 +580,9 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     if unused:
         raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
     models = _check_model_views(model_views, class_infos, caller)
+    lengths = resolve_descriptor_lengths([v[2] for v in views], normal_radius_m=normal_radius_m,
+                                         voxel_leaf_m=voxel_leaf_m, caller=caller)
+    radius, leaf = lengths["normal_radius_m"], lengths["voxel_leaf_m"]
     variant = vfh_variant if vfh_variant is not None else _vfh_default_variant()
     view_seeds = rng.integers(0, 2**31 - 1, size=len(views))
     esf = np.empty((len(views), ESF_BINS), np.float32)
@@ -469,7 +591,8 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         for k, (label, view_id, cloud) in enumerate(views):
             try:
                 d = compute_view_descriptors(cloud, vfh_variant=variant, normal_radius_m=radius,
-                                             esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]))
+                                             esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]),
+                                             vfh_scale=lengths["vfh_scale"])
             except SemslamError as exc:
                 raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
             esf[k], vfh[k] = d.esf, d.vfh
@@ -477,6 +600,12 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     counts = np.array([v[2].n_points for v in views], dtype=np.int64)
     params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
               "seed": seed if isinstance(seed, int) else None}
+    if "spacing_m" in lengths:  # "auto": how the lengths were chosen
+        params["spacing_m"] = lengths["spacing_m"]
+        params["vfh_scale"] = lengths["vfh_scale"]
+        params["auto"] = [name for name, value in (("normal_radius_m", normal_radius_m), ("voxel_leaf_m", voxel_leaf_m))
+                          if _is_auto(value)]
+        params["auto_rule"] = lengths["auto_rule"]
     return ViewDatabase(
         labels=np.array([str(v[0]) for v in views]),
         view_ids=np.array([str(v[1]) for v in views]),
