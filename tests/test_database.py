@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import zipfile
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -371,3 +372,53 @@ def test_concurrent_descriptors_equal_serial_ones():
     line = PointCloud(np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)])  # both fail: ESF's error wins
     with pytest.raises(DescriptorError, match="must span a surface"):
         compute_view_descriptors(line, esf_n_samples=100)
+
+
+def test_crafted_database_files_are_refused_before_any_allocation(tmp_path):
+    """An .npy given as a database, a .npy entry declaring 10^9 rows (numpy would allocate terabytes), a zip
+    bomb past the size cap, deep JSON metadata and parameters of the wrong type: each a DatabaseError naming the
+    file, at once."""
+    import io as _io
+    import json as _json
+    import zipfile as _zip
+
+    from semslam.recognition import database as D
+
+    npy = tmp_path / "views.npy"
+    np.save(npy, np.zeros((3, 3)))
+    with pytest.raises(DatabaseError, match="views.npy.*not a readable zip archive"):
+        load_database(npy)
+
+    def npz_with(entries: dict) -> Path:
+        path = tmp_path / "crafted.npz"
+        with _zip.ZipFile(path, "w") as zf:
+            for name, data in entries.items():
+                zf.writestr(name, data)
+        return path
+
+    header = _io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**9, 3)})
+    with pytest.raises(DatabaseError, match=r"crafted.npz.*'points_xyz_m.npy' declares 24000000000 bytes"):
+        load_database(npz_with({"points_xyz_m.npy": header.getvalue() + b"\0" * 64}))
+    deep = "[" * 100000 + "]" * 100000
+    buf = _io.BytesIO()
+    np.save(buf, np.array(deep))
+    with pytest.raises(DatabaseError, match="crafted.npz"):
+        load_database(npz_with({"meta.npy": buf.getvalue()}))
+    old = D.MAX_DECOMPRESSED_BYTES
+    try:
+        D.MAX_DECOMPRESSED_BYTES = 1000
+        with pytest.raises(DatabaseError, match="crafted.npz' would decompress to 5000 bytes"):
+            load_database(npz_with({"a.bin": b"\0" * 5000}))
+    finally:
+        D.MAX_DECOMPRESSED_BYTES = old
+    views, classes = synthetic_shape_views(2, n_points=150, seed=1)
+    good = save_database(build_database(views, classes, seed=0, esf_n_samples=500), tmp_path / "good.npz")
+    with np.load(good, allow_pickle=False) as npz:
+        entries = {k: npz[k] for k in npz.files}
+    meta = _json.loads(str(entries["meta"][()]))
+    meta["params"] = ["not", "a", "table"]
+    entries["meta"] = np.array(_json.dumps(meta))
+    np.savez(tmp_path / "params.npz", **entries)
+    with pytest.raises(DatabaseError, match="params.npz' has invalid descriptor parameters"):
+        load_database(tmp_path / "params.npz", verify=False)

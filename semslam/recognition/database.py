@@ -758,7 +758,8 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
     path = Path(path)
     where = f"The database file {str(path)!r}"
     if not path.is_file():
-        raise DatabaseError(f"{where} does not exist.")
+        raise DatabaseError(f"{where} does not exist or is not a regular file.")
+    _inspect_archive(path, where)
     try:
         with np.load(path, allow_pickle=False) as npz:
             if "meta" not in npz.files:
@@ -780,8 +781,12 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
         raise DatabaseError(f"{where} is truncated or corrupted (bad zip archive: {exc}).") from None
-    except (ValueError, OSError, EOFError, KeyError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (ValueError, OSError, EOFError, KeyError, json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise DatabaseError(f"{where} is truncated or corrupted ({type(exc).__name__}: {exc}).") from None
+    params = meta.get("params", {})
+    if not isinstance(params, dict) or not all(v is None or isinstance(v, (str, int, float, bool, dict, list))
+                                               for v in params.values()):
+        raise DatabaseError(f"{where} has invalid descriptor parameters: expected a table, got {params!r:.80}.")
     if verify:
         checksums = meta.get("checksums", {})
         for name, arr in arrays.items():
@@ -796,7 +801,7 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
     for name, arr in arrays.items():
         object.__setattr__(db, name, arr)
     object.__setattr__(db, "class_infos", classes)
-    object.__setattr__(db, "params", dict(meta.get("params", {})))
+    object.__setattr__(db, "params", dict(params))
     if "model_labels" not in arrays:  # version 1: no pose-model views
         for name, value in zip(_MODEL_ARRAYS, (np.zeros(0, "<U1"), np.zeros(1, np.int64), np.zeros((0, 3), np.float32),
                                                np.zeros((0, 3)))):
@@ -805,6 +810,44 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
     for name in _ARRAYS + _MODEL_ARRAYS:
         getattr(db, name).setflags(write=False)
     return db
+
+
+#: the most a database may hold once decompressed: far above any real one, far below what a crafted file could ask
+MAX_DECOMPRESSED_BYTES = 4 << 30
+
+
+def _inspect_archive(path: Path, where: str) -> None:
+    """Before numpy allocates anything: the file is a zip archive, its entries decompress to at most
+    :data:`MAX_DECOMPRESSED_BYTES` in all, and no ``.npy`` entry declares more data than it holds (a crafted
+    header could ask for terabytes)."""
+    if not zipfile.is_zipfile(path):
+        raise DatabaseError(f"{where} is truncated or corrupted, or not a semslam view database (.npz): it is not a "
+                            "readable zip archive.")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            total = sum(i.file_size for i in infos)
+            if total > MAX_DECOMPRESSED_BYTES:
+                raise DatabaseError(f"{where} would decompress to {total} bytes, more than the "
+                                    f"{MAX_DECOMPRESSED_BYTES} a view database may hold.")
+            for info in infos:
+                if not info.filename.endswith(".npy"):
+                    continue
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = read_header(fh)
+                    if dtype.hasobject:
+                        raise DatabaseError(f"{where}: the array {info.filename!r} holds Python objects.")
+                    declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                    if declared > info.file_size:
+                        raise DatabaseError(f"{where}: the array {info.filename!r} declares {declared} bytes but "
+                                            f"holds {info.file_size}: truncated or crafted.")
+    except DatabaseError:
+        raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise DatabaseError(f"{where} is truncated or corrupted ({type(exc).__name__}: {exc}).") from None
 
 
 def _check_consistency(db: ViewDatabase, where: str, error: type[SemslamError]) -> None:
