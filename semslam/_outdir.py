@@ -29,13 +29,20 @@ def check_output_dir(path: str | os.PathLike, *, overwrite: bool, option: str = 
     if out.exists() and not out.is_dir():
         raise InputError(f"The {option!r} option must name a directory. Got the file {str(out)!r} instead.")
     if out.is_dir() and any(out.iterdir()):
-        if not any((out / m).is_file() for m in markers):
+        if not any((out / m).is_file() for m in markers) and not _legacy_run(out):
             raise InputError(f"The {option!r} directory {str(out)!r} is not empty and was not written by semslam: "
                              "choose another (semslam never replaces what it did not write).")
         if not overwrite:
             raise InputError(f"The {option!r} directory {str(out)!r} holds an earlier semslam run: choose another, "
                              "or overwrite it.")
     return out
+
+
+def _legacy_run(out: Path) -> bool:
+    """A run directory semslam 0.1 wrote before the marker existed (config.json and metrics.json beside its report
+    or its trajectory): still ours to replace, so that an upgrade does not break ``make demo``."""
+    return all((out / f).is_file() for f in ("config.json", "metrics.json")) and \
+        any((out / f).is_file() for f in ("report.html", "trajectory.csv"))
 
 
 def _clean_stale(out: Path) -> None:

@@ -45,3 +45,17 @@ def test_an_earlier_run_survives_a_failed_run_and_is_replaced_by_a_complete_one(
     stale.mkdir()
     assert main(["slam", "synthetic:2", "--mode", "dr", "--out", str(run), "--overwrite"]) == 0
     assert not stale.exists()  # a killed run's leftovers are cleaned by the next run into the same place
+
+
+def test_a_run_written_before_the_marker_is_still_replaced(tmp_path):
+    """`make demo` after an upgrade: runs/demo of semslam 0.1 has no marker but is recognisably a semslam run."""
+    old = tmp_path / "demo"
+    old.mkdir()
+    for name in ("config.json", "metrics.json", "report.html"):
+        (old / name).write_text("{}")
+    with staged_output_dir(old, overwrite=True) as tmp:
+        (tmp / "report.html").write_text("new")
+    assert (old / "report.html").read_text() == "new" and (old / MARKER).is_file()
+    (old / MARKER).unlink()  # report.html alone, no marker: not recognisably ours, refused
+    with pytest.raises(InputError, match="not written by semslam"):
+        check_output_dir(old, overwrite=True)
