@@ -59,6 +59,15 @@ class MotionConfig:
     #: are caught by the DVL's manoeuvre reset). (0.05, 0.01, 0.02) made the filter pessimistic; a near-zero surge
     #: noise would be right only for a vehicle that never changes speed (and diverges at the launch ramp)
     velocity_rw_mps_per_sqrt_s: float | tuple = (0.02, 0.01, 0.01)
+    #: the same while the DVL is out (no accepted DVL sample for ``unaided_after_s``): nothing then catches a
+    #: manoeuvre, so the noise must cover the vehicle's real velocity changes. Measured, not assumed: the default
+    #: is :func:`semslam.slam.motion_noise.measure_unaided_motion` on the simulator's missions' DVL logs
+    #: (``benchmarks/dvl_outage.py --measure``); measure your vehicle's from one of its DVL logs
+    unaided_velocity_rw_mps_per_sqrt_s: float | tuple = (0.054, 0.021, 0.026)
+    unaided_after_s: float = 1.0
+    #: the body velocity's spread when it is not known (no DVL at the start of the run): per-axis rms of the
+    #: vehicle's body velocity, measured like the unaided noise
+    unknown_velocity_sigma_mps: float | tuple = (0.29, 0.02, 0.029)
     max_predict_dt_s: float = 0.1
     propagate_attitude_noise: bool = True
     #: estimate the DVL's calibration (bias, degraded-bottom bias, scale factor, misalignment) when the vehicle
@@ -74,20 +83,21 @@ class MotionConfig:
     observability_constrained: bool = True
 
     def __post_init__(self) -> None:
-        vrw = self.velocity_rw_mps_per_sqrt_s
-        if isinstance(vrw, bool) or not isinstance(vrw, (int, float)):
-            try:
-                vrw = tuple(float(x) for x in vrw)
-            except (TypeError, ValueError):
-                vrw = ()
-            if len(vrw) != 3 or not all(math.isfinite(x) and x >= 0 for x in vrw):
-                raise ConfigError("The 'velocity_rw_mps_per_sqrt_s' field of MotionConfig must be a number or three "
-                                  f"finite numbers >= 0 (surge, sway, heave). Got {self.velocity_rw_mps_per_sqrt_s!r} instead.")
-            object.__setattr__(self, "velocity_rw_mps_per_sqrt_s", vrw)
-        elif not (math.isfinite(vrw) and vrw >= 0):
-            raise ConfigError(f"The 'velocity_rw_mps_per_sqrt_s' field of MotionConfig must be >= 0. Got {vrw!r} instead.")
+        for name in ("velocity_rw_mps_per_sqrt_s", "unaided_velocity_rw_mps_per_sqrt_s", "unknown_velocity_sigma_mps"):
+            vrw = getattr(self, name)
+            if isinstance(vrw, bool) or not isinstance(vrw, (int, float)):
+                try:
+                    vrw = tuple(float(x) for x in vrw)
+                except (TypeError, ValueError):
+                    vrw = ()
+                if len(vrw) != 3 or not all(math.isfinite(x) and x >= 0 for x in vrw):
+                    raise ConfigError(f"The {name!r} field of MotionConfig must be a number or three finite numbers "
+                                      f">= 0 (surge, sway, heave). Got {getattr(self, name)!r} instead.")
+                object.__setattr__(self, name, vrw)
+            elif not (math.isfinite(vrw) and vrw >= 0):
+                raise ConfigError(f"The {name!r} field of MotionConfig must be >= 0. Got {vrw!r} instead.")
         _check_types(self)
-        _positive(self, "max_predict_dt_s")
+        _positive(self, "max_predict_dt_s", "unaided_after_s")
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,9 @@ from .evaluation import evaluate_run
 from .results import SlamResult
 from .session import SlamSession
 
+#: the estimators behind a run (see :func:`run_slam`)
+BACKENDS = ("ekf", "isam2", "batch")
+
 
 def _start(dataset: Dataset) -> float:
     """The run starts with the first navigation (or truth) sample that has an attitude at or before it."""
@@ -60,7 +63,8 @@ def merged_messages(dataset: Dataset, detections_by_scan: dict[int, list[Detecti
 
 
 def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | None = None, *, mode: str = "pose",
-             config: SlamConfig | None = None, seed=0, symmetries: dict[str, Symmetry] | None = None) -> SlamResult:
+             config: SlamConfig | None = None, seed=0, symmetries: dict[str, Symmetry] | None = None,
+             backend: str = "ekf", huber_k: float | None = None) -> SlamResult:
     """Run the filter over ``dataset`` in ``mode`` (see :mod:`semslam.slam.session`) and evaluate it against the
     dataset's ground truth when present.
 
@@ -77,8 +81,13 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
         Seeds the launch-fix error and the survey error drawn around the ground truth (simulated data only).
     symmetries : dict, optional
         Symmetry per class label.
+    backend : {"ekf", "isam2", "batch"}
+        The EKF (:class:`SlamSession`) or a GTSAM factor graph (:class:`semslam.slam.graph.GraphSession`).
+    huber_k : float, optional
+        Graph backends: Huber threshold of the detection factors (None: Gaussian).
     """
     check_choice("mode", mode, MODES, caller="run_slam")
+    check_choice("backend", backend, BACKENDS, caller="run_slam")
     if not isinstance(dataset, Dataset):
         raise SlamError(f"The 'dataset' argument of run_slam must be a Dataset. Got {type(dataset).__name__} instead.")
     if len(dataset.attitude) == 0:
@@ -95,10 +104,18 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
     dp0 = init_rng.normal(0.0, cfg.initialisation.initial_position_sigma_m, 3)
     if dataset.truth is not None and cfg.initialisation.perturb_initial_position:
         p0 = p0 + dp0
-    valid = np.flatnonzero(dataset.dvl.valid)
-    v0 = dataset.dvl.velocity_body_mps[valid[0]] if len(valid) else np.zeros(3)
-    session = SlamSession(dataset.vehicle, mode=mode, config=cfg, symmetries=symmetries, start_stamp_s=t0,
-                          initial_position_ned_m=p0, initial_velocity_body_mps=v0)
+    # the initial velocity: the first valid DVL sample if it is at the start (a later one would be the future's
+    # velocity given as the start's), else unknown (zero, known to the vehicle's velocity spread)
+    valid = np.flatnonzero(dataset.dvl.valid & (dataset.dvl.stamp_s <= t0 + cfg.motion.unaided_after_s))
+    v0 = dataset.dvl.velocity_body_mps[valid[0]] if len(valid) else None
+    kw = dict(mode=mode, config=cfg, symmetries=symmetries, start_stamp_s=t0, initial_position_ned_m=p0,
+              initial_velocity_body_mps=v0)
+    if backend == "ekf":
+        session = SlamSession(dataset.vehicle, **kw)
+    else:
+        from .graph import GraphSession  # lazily: GTSAM is imported only for the graph backends
+
+        session = GraphSession(dataset.vehicle, backend=backend, huber_k=huber_k, **kw)
     if cfg.initialisation.surveyed_objects:
         session.add_surveyed_landmarks(*_surveyed(dataset, cfg, init_rng))
     add = {"attitude": session.add_attitude, "dvl": lambda t, v, ok, r: session.add_dvl(t, v, valid=ok, beam_range_m=r),

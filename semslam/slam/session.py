@@ -61,7 +61,11 @@ class SlamSession:
         Start of the run (the first epoch). Default: the stamp of the first message.
     initial_position_ned_m, initial_velocity_body_mps : array-like of shape (3,)
         The launch point (it defines the world frame; known to ``config.initialisation.initial_position_sigma_m``)
-        and the initial body velocity (known to ``initial_velocity_sigma_mps``).
+        and the initial body velocity (known to ``initial_velocity_sigma_mps``). ``initial_velocity_body_mps=None``:
+        not known (no DVL at the start): zero, known to ``config.motion.unknown_velocity_sigma_mps``.
+
+    While no DVL sample has been accepted for ``config.motion.unaided_after_s`` (an outage, a dive without DVL),
+    the prediction uses the unaided process noise ``config.motion.unaided_velocity_rw_mps_per_sqrt_s``.
     """
 
     def __init__(self, vehicle: VehicleDescription, *, mode: str = "pose", config: SlamConfig | None = None,
@@ -77,8 +81,9 @@ class SlamSession:
         self.vehicle, self.cfg, self.mode = vehicle, cfg, mode
         self.symmetries = dict(symmetries or {})
         self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
-        self._v0 = as_float_array("initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession",
-                                  error=SlamError)
+        self._v_known = initial_velocity_body_mps is not None
+        self._v0 = np.zeros(3) if not self._v_known else as_float_array(
+            "initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession", error=SlamError)
         if start_stamp_s is not None:
             try:
                 ok = not isinstance(start_stamp_s, bool) and math.isfinite(float(start_stamp_s))
@@ -114,7 +119,10 @@ class SlamSession:
         calib = cfg.motion.dvl_calibration and any(v > 0 for v in (d.scale_factor_sigma, d.misalignment_sigma_rad,
                                                                d.bias_sigma_mps, d.degraded_bias_sigma_mps))
         init = cfg.initialisation
-        var0 = [init.initial_position_sigma_m ** 2] * 3 + [init.initial_velocity_sigma_mps ** 2] * 3
+        v_sigma = np.broadcast_to(init.initial_velocity_sigma_mps if self._v_known
+                                  else np.asarray(cfg.motion.unknown_velocity_sigma_mps, dtype=float), (3,))
+        var0 = [init.initial_position_sigma_m ** 2] * 3 + [float(x) ** 2 for x in v_sigma]
+        self._last_dvl_s = self._t0 if self._v_known else -math.inf  #: last accepted DVL sample (unaided after it)
         if calib:
             var0 += [max(d.bias_sigma_mps, 1e-6) ** 2] * 3 + [1e-12] * 3 + [max(d.scale_factor_sigma, 1e-6) ** 2,
                                                                           max(d.misalignment_sigma_rad, 1e-6) ** 2]
@@ -252,7 +260,9 @@ class SlamSession:
         while self.t < t - 1e-12:
             dt = min(cfg.motion.max_predict_dt_s, t - self.t)
             rpy, f = self.attitude.at(self.t + dt / 2)
-            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.motion.velocity_rw_mps_per_sqrt_s,
+            unaided = self.t - self._last_dvl_s > cfg.motion.unaided_after_s
+            ekf.predict(dt, rotation_from_rpy(*rpy), velocity_rw=cfg.motion.unaided_velocity_rw_mps_per_sqrt_s
+                        if unaided else cfg.motion.velocity_rw_mps_per_sqrt_s,
                         attitude_cov_world=self.attitude.cov_world(rpy, f),
                         yaw_bias_rw=self.vehicle.attitude.yaw_bias_walk_rad_per_sqrt_s, dvl_on_slope=degraded)
             self.t += dt
@@ -266,7 +276,10 @@ class SlamSession:
         if not valid:
             self._log(stamp_s=t, kind="dvl_dropout", accepted=False)
             return
-        self._log(stamp_s=t, **self.dvl.update(self.ekf, self.gate, self.dvl.body_velocity(v), flat))
+        rec = self.dvl.update(self.ekf, self.gate, self.dvl.body_velocity(v), flat)
+        if rec["accepted"]:
+            self._last_dvl_s = t
+        self._log(stamp_s=t, **rec)
 
     def _record(self, t: float) -> None:
         ekf, H = self.ekf, self._H
