@@ -230,6 +230,11 @@ class SlamSession:
                 continue
             self._history_before(t)
             self._predict_to(t)
+            if self.ekf._N is not None and t - self._last_dvl_s > self.cfg.motion.unaided_after_s:
+                # unaided, the velocity the null direction was propagated with may have been far off: re-anchor it
+                # on the current estimate (a rotation about the vehicle now; the launch prior is not a measurement)
+                # so that the projection removes the direction the measurements really cannot see
+                self.ekf.constrain_heading_nullspace(True)
             if kind == "dvl":
                 self._update_dvl(t, *payload)
             elif kind == "depth":
