@@ -131,3 +131,42 @@ def test_detect_and_slam_commands_reproduce_the_demo(quick_run, tmp_path, capsys
     a = json.loads((run / "metrics.json").read_text())
     b = json.loads((out / "slam" / "pose" / "metrics.json").read_text())
     assert a["ate_rmse_m"] == b["ate_rmse_m"] and a["smoother"] == b["smoother"]
+
+
+def test_report_reads_in_a_minute(quick_run):
+    """Issue 18 item 6: the summary (key numbers with goal verdicts) comes first, long tables are collapsed, the raw
+    metrics are linked (not dumped), class names are written as people write them. Catches a report that dumps
+    metrics.json into a <pre>, lists 81 detections open, or puts the summary after the papers' tables."""
+    out, _ = quick_run
+    html = (out / "report.html").read_text()
+    h2 = re.findall(r"<h2>([^<]*)</h2>", html)
+    assert h2[0] == "Summary", h2
+    summary = html[html.index("<h2>Summary</h2>"):html.index(f"<h2>{h2[1]}</h2>")]
+    assert re.search(r"\d+ of \d+ goals met", summary)
+    assert summary.count("verdict-") >= 4 and "<details>" not in summary
+    assert "<pre>" not in html and "<a href='metrics.json'>metrics.json</a>" in html
+    n_det = len((out / "detections.jsonl").read_text().strip().splitlines())
+    if n_det > 12:
+        assert re.search(rf"<details><summary>Detections: {n_det} rows", html)
+    text = re.sub(r"<img[^>]*>", "", html)  # the page's words, not the figures' bytes
+    assert not re.search(r"ball_valve|reducing_socket|reducing_tee", text), "class labels with underscores"
+    assert "reducing socket" in text
+
+
+def test_report_checks_pass_in_headless_chromium(quick_run):
+    """The same checks as benchmarks/report_chromium.py, in a real browser: summary on the first screen, every image
+    decoded, long tables collapsed. Needs Chromium (skipped with this reason where it is not installed)."""
+    import importlib.util
+    import shutil
+    from pathlib import Path
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if not chromium:
+        pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "report_chromium.py"
+    spec = importlib.util.spec_from_file_location("report_chromium", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out, _ = quick_run
+    failed = [(name, value) for name, value, ok in mod.checks(mod.probe(out / "report.html", chromium)) if not ok]
+    assert not failed

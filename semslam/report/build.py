@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import ReportError
 from .html import Figure, Section, figure_to_png, write_report
+from .summary import human_label, summary_section
 
 MODE_ORDER = ("dr", "position", "pose", "pose+heading")
 
@@ -135,6 +136,9 @@ def build_report(run_dir: str | Path) -> Path:
     sections.append(sec) if sec else missing.append("consensus initialisation (consensus.json)")
     if not sections:
         raise ReportError(f"nothing to report in {run_dir}: none of the expected outputs is there")
+    sec = summary_section(run_dir, slam_runs)
+    if sec:
+        sections.insert(0, sec)
     summary = ("Regenerated from this run: the papers' Tables 1-2 and Figs. 3, 4 and 6, the consensus "
                "initialisation, and metrics beyond the papers. Units: metres, seconds, degrees where stated; "
                "positions in the world NED frame.")
@@ -181,10 +185,10 @@ def _section_tables(run_dir: Path, plt) -> Section | None:
         labels = ev["labels"]
         conf = np.asarray(ev["confusion"])
         rows.append([desc.upper(), clf, f"{100 * ev['accuracy']:.2f}%",
-                     ", ".join(f"{k}: {100 * v:.0f}%" for k, v in ev["recall"].items())])
+                     ", ".join(f"{human_label(k)}: {100 * v:.0f}%" for k, v in ev["recall"].items())])
         if clf == "svm" or key.endswith("svm"):
             fig, ax = plt.subplots(figsize=(5.2, 4.4))
-            plot_confusion_matrix(ax, conf, labels,
+            plot_confusion_matrix(ax, conf, [human_label(x) for x in labels],
                                   title=f"{desc.upper()} + {clf.upper()}: {100 * ev['accuracy']:.2f}% correct")
             sec.figures.append(Figure(f"table_{key}.png", figure_to_png(fig),
                                       f"Confusion matrix, {desc.upper()} features, {clf.upper()} classifier, leave-one-out."))
@@ -269,7 +273,7 @@ def _section_recognition(run_dir: Path, plt) -> Section | None:
     per_class = s.get("per_class", {})
     if per_class:
         sec.tables.append(("Per class", ["class", "object clusters", "recognised"],
-                           [[k, v["clusters"], v["recognised"]] for k, v in per_class.items()]))
+                           [[human_label(k), v["clusters"], v["recognised"]] for k, v in per_class.items()]))
     correct = [c for c in rec["clusters"] if c.get("detected") and c.get("label") == c.get("truth_label")]
     rot = [c["rotation_error_deg"] for c in correct if "rotation_error_deg" in c]
     trans = [1000 * c["translation_error_m"] for c in correct if "translation_error_m" in c]
@@ -304,7 +308,7 @@ def _section_detections(run_dir: Path) -> Section | None:
                 raise ReportError(f"{path} has a malformed detection line: {exc}") from None
             x, y, z, r, p, yw = d.T_sensor_object.as_xyz_rpy()
             sd = np.sqrt(np.clip(np.diag(d.covariance_6x6), 0, None))
-            rows.append([path.name, d.scan_id, d.label, d.score, f"{x:.3f} {y:.3f} {z:.3f}",
+            rows.append([path.name, d.scan_id, human_label(d.label), d.score, f"{x:.3f} {y:.3f} {z:.3f}",
                          f"{np.degrees(r):.1f} {np.degrees(p):.1f} {np.degrees(yw):.1f}",
                          f"{1000 * sd[:3].max():.1f}", d.fitness, 1000 * d.rmse_m if np.isfinite(d.rmse_m) else "",
                          "yes" if d.reliable else "no"])
@@ -409,20 +413,37 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
                                 "Monte-Carlo averages (semslam montecarlo) narrow the band.",
                                 figures=[Figure("nees.png", figure_to_png(fig), "Position NEES with its 95% band.")]))
         if "pose+heading" in trajs and "yaw_bias_rad" in trajs["pose+heading"]:
-            tr = trajs["pose+heading"]
-            fig, ax = plt.subplots(figsize=(10, 3.2))
-            ax.plot(tr["stamp_s"], np.degrees(tr["yaw_bias_rad"]), label="estimated AHRS yaw bias")
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel("yaw bias [deg]")
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=7)
-            ax.set_title("Heading-bias state (pose+heading mode)")
-            sections.append(Section("Heading-bias mode (beyond the papers)",
-                                    "With an AHRS yaw-bias state, object orientations make the heading observable.",
-                                    figures=[Figure("heading_bias.png", figure_to_png(fig), "Estimated yaw bias.")]))
+            sections.append(_section_heading_bias(trajs["pose+heading"], plt))
     else:  # a recorded dive: no truth, so what the filter says of itself
         sections += _sections_without_truth(trajs, landmarks, plt)
     return sections
+
+
+#: a yaw-bias estimate that never leaves this band (deg) is "no bias estimated", not a signal
+_BIAS_FLAT_DEG = 1e-3
+
+
+def _section_heading_bias(tr: dict, plt) -> Section:
+    """The AHRS yaw-bias estimate over time; a flat one is said in words (no 1e-13 noise on a signal's axis)."""
+    b = np.degrees(tr["yaw_bias_rad"])
+    title = "Heading-bias mode (beyond the papers)"
+    if not len(b) or np.nanmax(np.abs(b)) < _BIAS_FLAT_DEG:
+        return Section(title, "No bias estimated: the yaw-bias state stayed at 0 (below 0.001 deg) throughout the "
+                              "run. Without a surveyed landmark a constant AHRS bias is unobservable, and the "
+                              "observability-constrained filter does not invent one.")
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    ax.plot(tr["stamp_s"], b, label="estimated AHRS yaw bias")
+    lo, hi = float(np.nanmin(b)), float(np.nanmax(b))
+    if hi - lo < 0.1:  # a honest axis: at least 0.1 deg tall, so that a flat estimate looks flat
+        mid = 0.5 * (hi + lo)
+        ax.set_ylim(mid - 0.05, mid + 0.05)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("yaw bias [deg]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title("Heading-bias state (pose+heading mode)")
+    return Section(title, "With an AHRS yaw-bias state, object orientations make the heading observable.",
+                   figures=[Figure("heading_bias.png", figure_to_png(fig), "Estimated yaw bias.")])
 
 
 def _sections_without_truth(trajs: dict, landmarks: dict, plt) -> list[Section]:
@@ -444,7 +465,7 @@ def _sections_without_truth(trajs: dict, landmarks: dict, plt) -> list[Section]:
     for mode, lms in landmarks.items():
         for k, lm in enumerate(lms):
             sig = np.sqrt(np.clip(np.diag(lm["cov"]), 0, None))
-            rows.append([mode, k, lm["label"], *[float(v) for v in lm["position_ned_m"]], *[float(v) for v in sig]])
+            rows.append([mode, k, human_label(lm["label"]), *[float(v) for v in lm["position_ned_m"]], *[float(v) for v in sig]])
     if rows:
         out.append(Section("Landmark maps", "Each mode's map at the end of the dive (world NED).",
                            tables=[("Landmarks", ["mode", "#", "class", "x (m)", "y (m)", "z (m)", "sigma x (m)",
@@ -476,9 +497,9 @@ def _section_consensus(run_dir: Path, plt) -> Section | None:
     ax.set_ylabel("north x [m]")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    ax.set_title(f"Consensus initialisation of the first landmark ({c['label']}); arrows: object heading")
+    ax.set_title(f"Consensus initialisation of the first landmark ({human_label(c['label'])}); arrows: object heading")
     return Section("Landmark initialisation by consensus (second paper)",
-                   f"Unassociated observations of class {c['label']} in the world frame. Two observations agree when "
+                   f"Unassociated observations of class {human_label(c['label'])} in the world frame. Two observations agree when "
                    f"their positions are closer than {c['position_threshold_m']} m and their attitude distance "
                    f"1 - <q1, q2>^2 is below {c['attitude_threshold']}; the observation with the most agreement and "
                    f"its consensus set (at least {c['min_observations']} observations) give the initial pose "

@@ -46,13 +46,23 @@ def figure_to_png(fig, dpi: int = 110) -> bytes:
 
 def _table_html(caption: str, header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     def cell(v: object) -> str:
+        if v in ("met", "NOT met"):  # a goal's verdict (the summary table)
+            return f"<span class='verdict-{'met' if v == 'met' else 'not'}'>{v}</span>"
         if isinstance(v, float):
             return f"{v:.4g}"
         return html.escape(str(v))
 
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
-    return f"<table><caption>{html.escape(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    table = f"<table><caption>{html.escape(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    if len(rows) > COLLAPSE_ROWS:  # a long table is one line until the reader opens it
+        return (f"<details><summary>{html.escape(caption)}: {len(rows)} rows (click to show)</summary>"
+                f"{table}</details>")
+    return table
+
+
+#: tables longer than this are collapsed (<details>)
+COLLAPSE_ROWS = 12
 
 
 _STYLE = """
@@ -62,6 +72,7 @@ table{border-collapse:collapse;margin:1em 0;font-size:.9em}caption{text-align:le
 td,th{border:1px solid #bbb;padding:.25em .6em;text-align:right}th{background:#f0f0f0}
 td:first-child,th:first-child{text-align:left}figure{margin:1em 0}img{max-width:100%}
 figcaption{font-size:.9em;color:#444}pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.8em}
+details{margin:1em 0}summary{cursor:pointer;font-weight:600}.verdict-met{color:#176117}.verdict-not{color:#a00}
 """
 
 
@@ -69,7 +80,9 @@ def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *
                  summary: str = "") -> Path:
     """Write every figure as PNG into ``run_dir/figures`` and ``run_dir/report.html`` (atomically).
 
-    Returns the report's path.
+    ``metrics``: the run's metrics, linked as ``metrics.json`` (written beside the report when it is not there
+    yet), never dumped into the page. Tables longer than :data:`COLLAPSE_ROWS` rows are collapsed. Returns the
+    report's path.
     """
     run_dir = Path(run_dir)
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
@@ -88,7 +101,10 @@ def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *
             parts.append(f"<figure><img alt='{html.escape(fig.caption)}' src='data:image/png;base64,{b64}'>"
                          f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>")
     if metrics is not None:
-        parts.append("<h2>All metrics (metrics.json)</h2><pre>" + html.escape(json.dumps(metrics, indent=2)) + "</pre>")
+        if not (run_dir / "metrics.json").is_file():
+            atomic_write_text(run_dir / "metrics.json", json.dumps(metrics, indent=2))
+        parts.append("<h2>All metrics</h2><p>Every number of this run, machine-readable: "
+                     "<a href='metrics.json'>metrics.json</a>.</p>")
     parts.append("</body></html>")
     path = run_dir / "report.html"
     atomic_write_text(path, "\n".join(parts))
