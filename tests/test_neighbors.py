@@ -110,11 +110,17 @@ def test_bad_arguments():
         find_neighbors(pts)
     with pytest.raises(DescriptorError, match="points_xyz_m"):
         find_neighbors(np.array([[0, 0, np.nan]]), radius_m=0.1)
-    far = np.array([[0.0, 0, 0], [1e6, 0, 0]])
+    far = np.array([[0.0, 0, 0], [1e60, 0, 0]])  # 1e63 radii: beyond the grid's 2^52
     with pytest.raises(DescriptorError, match="method='kdtree'"):
         find_neighbors(far, radius_m=1e-3, method="grid")
     auto = find_neighbors(far, radius_m=1e-3)  # falls back to the KD-tree
     np.testing.assert_array_equal(auto.counts, [1, 1])
+    # 1e9 radii: the grid takes it (sized by occupied cells), same neighbours as the KD-tree
+    wide = np.array([[0.0, 0, 0], [5e-4, 0, 0], [1e6, 0, 0], [1e6, 5e-4, 0]])
+    grid = find_neighbors(wide, radius_m=1e-3, method="grid", sort=True)
+    tree = find_neighbors(wide, radius_m=1e-3, method="kdtree", sort=True)
+    np.testing.assert_array_equal(grid.indptr, tree.indptr)
+    np.testing.assert_array_equal(grid.indices, tree.indices)
 
 
 @pytest.mark.parametrize("nan_normals", ["pcl", "skip"])

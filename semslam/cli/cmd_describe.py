@@ -24,6 +24,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     normals.add_argument("--normal-radius", type=float, metavar="R", help="estimate normals within R metres")
     parser.add_argument("--fpfh-radius", type=float, metavar="R", help="FPFH search radius in metres (fpfh)")
     parser.add_argument("--point", type=int, default=0, metavar="I", help="FPFH of point I (default 0)")
+    parser.add_argument("--max-neighbors", type=int, default=None, metavar="K",
+                        help="FPFH: at most K neighbours per point, the nearest (default: no cap, as PCL; "
+                             "the result is PCL's whenever no point has more than K)")
     parser.add_argument("--seed", type=int, default=0, help="ESF random seed (default 0); with --sampler pcl, "
                         "the value PCL's time() would return")
     parser.add_argument("--sampler", choices=("numpy", "pcl"), default="numpy",
@@ -73,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError("The fpfh descriptor needs --fpfh-radius R (metres).")
             if not 0 <= args.point < cloud.n_points:
                 raise InputError(f"The --point argument must be in [0, {cloud.n_points}). Got {args.point} instead.")
-            bins = compute_fpfh(pts, normals, radius_m=args.fpfh_radius)[args.point]
-            payload.update(point=args.point, fpfh_radius_m=args.fpfh_radius)
+            bins = compute_fpfh(pts, normals, radius_m=args.fpfh_radius, max_neighbors=args.max_neighbors)[args.point]
+            payload.update(point=args.point, fpfh_radius_m=args.fpfh_radius, max_neighbors=args.max_neighbors)
     payload["time_ms"] = (time.perf_counter() - t0) * 1000.0
     payload["n_bins"] = len(bins)
     payload["bins"] = [float(b) for b in bins]

@@ -18,6 +18,11 @@ from numba import njit
 #: Dense cell table when the bounding grid has at most this many cells per point (+ a constant).
 DENSE_CELLS_PER_POINT = 8
 DENSE_CELLS_MIN = 1 << 16
+#: Clouds spanning fewer cells than this along every axis get cells relative to their minimum (packed
+#: keys); wider ones (far outliers) get compressed absolute cells (:func:`_compressed_cells`).
+DIRECT_CELLS_PER_AXIS = float(1 << 20)
+#: Largest ``max |p| / cell`` the grid accepts (floor stays exact in int64); beyond it, KD-tree search.
+MAX_ABS_CELLS = float(1 << 52)
 
 
 @njit(cache=True)
@@ -36,11 +41,18 @@ def _bucket(points, origin, cell_m):  # pragma: no cover - compiled
     n = points.shape[0]
     cells = np.empty((n, 3), dtype=np.int64)
     dims = np.ones(3, dtype=np.int64)
+    span = 0.0
     for i in range(n):
         for a in range(3):
-            c = math.floor((points[i, a] - origin[a]) / cell_m)
-            cells[i, a] = c
-            dims[a] = max(dims[a], c + 1)
+            span = max(span, (points[i, a] - origin[a]) / cell_m)
+    if span < DIRECT_CELLS_PER_AXIS:
+        for i in range(n):
+            for a in range(3):
+                c = math.floor((points[i, a] - origin[a]) / cell_m)
+                cells[i, a] = c
+                dims[a] = max(dims[a], c + 1)
+    else:
+        _compressed_cells(points, origin, cell_m, cells, dims)
     ny = dims[1]
     nz = dims[2]
     keys = np.empty(n, dtype=np.int64)
@@ -71,6 +83,37 @@ def _bucket(points, origin, cell_m):  # pragma: no cover - compiled
             spts[s, a] = points[i, a]
             scells[s, a] = cells[i, a]
     return order, skeys, spts, scells, start, dims
+
+
+@njit(cache=True)
+def _compressed_cells(points, origin, cell_m, cells, dims):  # pragma: no cover - compiled
+    """Cells of a cloud spanning too many cells for packed keys (one point at 1e9 m): absolute cell
+    coordinates ``floor(p / cell_m)`` (precise near 0 whatever the outliers), then on each axis the
+    occupied coordinates renumbered in order, consecutive ones 1 apart and the others 2 apart, so that
+    cells stay adjacent exactly when they were. The grid then has at most 2 N cells per axis: its size
+    follows the occupied cells, not the extent."""
+    n = points.shape[0]
+    big = 0.0
+    for i in range(n):
+        for a in range(3):
+            big = max(big, abs(points[i, a]) / cell_m)
+    shift = np.zeros(3) if big < MAX_ABS_CELLS else origin  # relative cells: the caller checks the span
+    total = 1.0
+    for a in range(3):
+        raw = np.empty(n, dtype=np.int64)
+        for i in range(n):
+            raw[i] = math.floor((points[i, a] - shift[a]) / cell_m)
+        uniq = np.unique(raw)
+        comp = np.zeros(uniq.shape[0], dtype=np.int64)
+        for u in range(1, uniq.shape[0]):
+            comp[u] = comp[u - 1] + (1 if uniq[u] - uniq[u - 1] == 1 else 2)
+        pos = np.searchsorted(uniq, raw)
+        for i in range(n):
+            cells[i, a] = comp[pos[i]]
+        dims[a] = comp[-1] + 1 if n else 1
+        total *= float(dims[a])
+    if total >= 4.0e18:
+        raise ValueError("too many occupied grid cells for 64-bit cell keys")
 
 
 @njit(cache=True, inline="always")
@@ -142,36 +185,71 @@ def _count(order, skeys, spts, scells, start, dims, radius_m):  # pragma: no cov
     return counts
 
 
+@njit(cache=True, inline="always")
+def gather(s, order, spts, lo, hi, n_cols, r2, max_nn, buf_i, buf_d):  # pragma: no cover - compiled
+    """Neighbours (squared distance < r2) of sorted point ``s`` into ``buf_i`` (indices) and ``buf_d``
+    (squared distances), column by column (x, then y), by cell z, then by increasing index; returns their
+    number. With ``max_nn`` > 0 and more neighbours than that, only the ``max_nn`` nearest are kept, by
+    increasing distance (ties in search order), as a FLANN radius search with ``max_nn``."""
+    px = spts[s, 0]
+    py = spts[s, 1]
+    pz = spts[s, 2]
+    m = 0
+    for c in range(n_cols):
+        for t in range(lo[c], hi[c]):
+            dx = spts[t, 0] - px
+            dy = spts[t, 1] - py
+            dz = spts[t, 2] - pz
+            d2 = (dx * dx + dy * dy) + dz * dz
+            if d2 < r2:
+                buf_i[m] = order[t]
+                buf_d[m] = d2
+                m += 1
+    if max_nn > 0 and m > max_nn:
+        key = np.argsort(buf_d[:m], kind="mergesort")[:max_nn]
+        sel_i = buf_i[key]
+        sel_d = buf_d[key]
+        buf_i[:max_nn] = sel_i
+        buf_d[:max_nn] = sel_d
+        m = max_nn
+    return m
+
+
+@njit(cache=True, inline="always")
+def cell_end(s0, skeys):  # pragma: no cover - compiled
+    """First sorted position after ``s0`` in another cell."""
+    s1 = s0 + 1
+    n = skeys.shape[0]
+    while s1 < n and skeys[s1] == skeys[s0]:
+        s1 += 1
+    return s1
+
+
 @njit(cache=True, nogil=True)
-def grid_fill(order, skeys, spts, scells, start, dims, radius_m, indptr, indices, sqdist):  # pragma: no cover
+def grid_fill(order, skeys, spts, scells, start, dims, radius_m, max_nn, indptr, indices, sqdist):  # pragma: no cover
     """Fill the CSR ``indices`` and ``sqdist`` (squared distance < radius^2) given ``indptr`` from
-    :func:`grid_bucket_count`. In each row the neighbours come column by column (x, then y), by cell z,
-    then by increasing index."""
+    :func:`grid_bucket_count` (row sizes capped at ``max_nn`` when > 0). Rows in :func:`gather`'s order."""
     n = order.shape[0]
     r2 = radius_m * radius_m
     lo = np.empty(9, dtype=np.int64)
     hi = np.empty(9, dtype=np.int64)
+    rowmax = 0
+    for i in range(n):
+        rowmax = max(rowmax, indptr[i + 1] - indptr[i])
+    cap = 0 if max_nn <= 0 else max_nn
+    size = n if cap > 0 else rowmax
+    buf_i = np.empty(size, dtype=np.int64)
+    buf_d = np.empty(size)
     s0 = 0
     while s0 < n:
-        s1 = s0 + 1
-        while s1 < n and skeys[s1] == skeys[s0]:
-            s1 += 1
+        s1 = cell_end(s0, skeys)
         n_cols = _block(s0, skeys, scells, start, dims, lo, hi)
         for s in range(s0, s1):
-            px = spts[s, 0]
-            py = spts[s, 1]
-            pz = spts[s, 2]
-            m = indptr[order[s]]
-            for c in range(n_cols):
-                for t in range(lo[c], hi[c]):
-                    dx = spts[t, 0] - px
-                    dy = spts[t, 1] - py
-                    dz = spts[t, 2] - pz
-                    d2 = (dx * dx + dy * dy) + dz * dz
-                    if d2 < r2:
-                        indices[m] = order[t]
-                        sqdist[m] = d2
-                        m += 1
+            m = gather(s, order, spts, lo, hi, n_cols, r2, cap, buf_i, buf_d)
+            a = indptr[order[s]]
+            for u in range(m):
+                indices[a + u] = buf_i[u]
+                sqdist[a + u] = buf_d[u]
         s0 = s1
 
 

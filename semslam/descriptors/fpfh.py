@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_float_array, check_choice
-from ..errors import DescriptorError
+from .._validation import as_float_array, check_choice, check_int, check_positive
+from ..errors import DescriptorError, InputError
+from ._fpfh_kernels import streamed_fpfh
 from ._pair_kernels import fpfh_from_spfh, spfh, spfh_symmetric
-from .neighbors import Neighborhoods, resolve_neighbors
+from .neighbors import Neighborhoods, grid_params, resolve_neighbors
 
 
 def compute_spfh(
@@ -36,6 +37,7 @@ def compute_fpfh(
     neighbors: Neighborhoods | None = None,
     nan_normals: str = "pcl",
     workers: int = -1,
+    max_neighbors: int | None = None,
 ) -> np.ndarray:
     """FPFH descriptors of every point, as PCL 1.13's ``FPFHEstimation`` (33 bins: f1 | f2 | f3).
 
@@ -65,6 +67,14 @@ def compute_fpfh(
         way every point's FPFH is finite: it is computed from its neighbours' SPFH.
     workers : int
         Threads for the KD-tree search (-1 = all).
+    max_neighbors : int, optional
+        ``k_max``: with ``radius_m``, use at most this many neighbours per point (the point included),
+        the nearest ones (FLANN's ``max_nn``); bounds the time on very dense clouds. Points with fewer
+        neighbours are unaffected, and when no point reaches the cap the result is exactly the
+        uncapped (PCL) one. None (default): no cap, as PCL.
+
+    With ``radius_m`` the neighbourhoods are streamed from the grid search twice instead of being
+    stored: memory is O(N) (~0.5 KB per point) whatever the density, and one far outlier costs nothing.
 
     Returns
     -------
@@ -74,6 +84,18 @@ def compute_fpfh(
     """
     caller = "compute_fpfh"
     pts, nrm = _check(points_xyz_m, normals_xyz, caller)
+    cap = 0 if max_neighbors is None else check_int("max_neighbors", max_neighbors, caller=caller, minimum=1)
+    if radius_m is not None and k is None and neighbors is None and len(pts):
+        r = check_positive("radius_m", radius_m, caller=caller)
+        check_choice("nan_normals", nan_normals, ("pcl", "skip"), caller=caller)
+        grid = grid_params(pts, r)
+        if grid is not None:
+            valid = np.isfinite(nrm).all(axis=1)
+            out, _, _ = streamed_fpfh(pts, nrm, valid, nan_normals == "skip", grid[0], grid[1], r, cap)
+            return out
+    elif cap:
+        raise InputError(f"The 'max_neighbors' argument of {caller} applies to 'radius_m' searches only. "
+                         f"Got max_neighbors={max_neighbors!r} with k={k!r} and neighbors={neighbors!r}.")
     neighbors = resolve_neighbors(pts, k=k, radius_m=radius_m, neighbors=neighbors, workers=workers, caller=caller,
                                   order="'radius_m', 'k' and 'neighbors'")
     check_choice("nan_normals", nan_normals, ("pcl", "skip"), caller=caller)

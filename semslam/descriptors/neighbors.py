@@ -67,6 +67,7 @@ def find_neighbors(
     workers: int = -1,
     method: str = "auto",
     sort: bool = False,
+    max_neighbors: int | None = None,
 ) -> Neighborhoods:
     """Neighbourhoods of every point, by k nearest neighbours or by radius (exactly one of them).
 
@@ -85,12 +86,18 @@ def find_neighbors(
     method : {"auto", "grid", "kdtree"}
         Radius search: "grid" a uniform grid of cells of side ~``radius_m`` (numba, fastest);
         "kdtree" scipy's ``cKDTree.sparse_distance_matrix``; "auto" the grid unless the cloud
-        spans more than 2^20 radii along an axis. The neighbour sets are the same (up to
-        points at exactly ``radius_m``, where the two round differently); their order within a
-        row differs. k-nearest searches always use cKDTree.
+        spans more than 2^52 radii along an axis. The grid is sized by its occupied cells (its
+        memory follows the points, not the extent), so one far outlier costs nothing. The
+        neighbour sets are the same (up to points at exactly ``radius_m``, where the two round
+        differently); their order within a row differs. k-nearest searches always use cKDTree.
     sort : bool
         Sort every radius neighbourhood by increasing distance (then index); k-nearest lists are
         always sorted.
+    max_neighbors : int, optional
+        Radius search (grid) only: keep at most this many neighbours per point (the point itself
+        included), the nearest ones, like FLANN's ``max_nn``. Bounds the memory (16 bytes per kept
+        pair) and time on very dense clouds; neighbourhoods below the cap are exactly the uncapped
+        ones. Capped neighbourhoods are not symmetric. None (default): no cap, as PCL.
 
     Returns
     -------
@@ -114,26 +121,29 @@ def find_neighbors(
         idx = np.asarray(idx, dtype=np.int64).reshape(n, k)
         return Neighborhoods(np.arange(n + 1, dtype=np.int64) * k, idx.ravel(), (dist**2).ravel())
     r = check_positive("radius_m", radius_m, caller=caller)
-    origin = pts.min(axis=0)
-    # Cells a little wider than r, so that rounding can never put two neighbours two cells apart.
-    cell_m = r * (1.0 + 1e-8)
-    fits = float((pts.max(axis=0) - origin).max()) / cell_m < _MAX_CELLS_PER_AXIS
-    if method == "kdtree" or (method == "auto" and not fits):
+    cap = 0 if max_neighbors is None else check_int("max_neighbors", max_neighbors, caller=caller, minimum=1)
+    grid = grid_params(pts, r)
+    if method == "kdtree" or (method == "auto" and grid is None):
+        if cap:
+            raise InputError(f"The 'max_neighbors' argument of {caller} needs the grid search. Got method="
+                             f"{method!r} on a cloud the grid cannot take (extent {np.ptp(pts, axis=0).max()} m).")
         nb = _kdtree_radius(pts, r)
-    elif not fits:
+    elif grid is None:
         raise DescriptorError(
             f"The 'points_xyz_m' argument of {caller} (method='grid') must span fewer than "
             f"{_MAX_CELLS_PER_AXIS} radii along every axis. Got an extent of "
-            f"{float((pts.max(axis=0) - origin).max())} m for radius_m={r}; use method='kdtree'."
+            f"{float(np.ptp(pts, axis=0).max())} m for radius_m={r}; use method='kdtree'."
         )
     else:
-        nb = _grid_radius(pts, origin, r, cell_m)
+        nb = _grid_radius(pts, grid[0], r, grid[1], cap)
     if sort:
         sort_rows(nb.indptr, nb.indices, nb.sqdist_m2)
     return nb
 
 
-_MAX_CELLS_PER_AXIS = 2**20
+#: The grid search handles clouds spanning fewer cells than this along every axis; the grid is sized by its
+#: occupied cells, not by the extent (see ``_neighbors_kernels._compressed_cells``), so a far outlier is fine.
+_MAX_CELLS_PER_AXIS = 2**52
 
 
 def resolve_neighbors(pts: np.ndarray, *, k: int | None, radius_m: float | None, neighbors: "Neighborhoods | None",
@@ -151,15 +161,32 @@ def resolve_neighbors(pts: np.ndarray, *, k: int | None, radius_m: float | None,
     return neighbors
 
 
-def _grid_radius(pts: np.ndarray, origin: np.ndarray, r: float, cell_m: float) -> Neighborhoods:
+def grid_params(pts: np.ndarray, r: float) -> tuple[np.ndarray, float] | None:
+    """(origin, cell side) of the radius-``r`` grid search of ``pts`` (N > 0), or None when the grid
+    cannot take the cloud (then use a KD-tree)."""
+    origin = pts.min(axis=0)
+    # Cells a little wider than r, so that rounding can never put two neighbours two cells apart.
+    cell_m = r * (1.0 + 1e-8)
+    span = float((pts.max(axis=0) - origin).max()) / cell_m
+    if not span < _MAX_CELLS_PER_AXIS:
+        return None
+    if span >= 2**20:  # compressed cells (far outliers): at most 2 per occupied coordinate, keys must fit in int64
+        dims = [2.0 * len(np.unique(np.floor(pts[:, a] / cell_m))) + 1.0 for a in range(3)]
+        if dims[0] * dims[1] * dims[2] >= 4.0e18:
+            return None
+    return origin, cell_m
+
+
+def _grid_radius(pts: np.ndarray, origin: np.ndarray, r: float, cell_m: float, cap: int = 0) -> Neighborhoods:
     grid, counts = grid_bucket_count(pts, origin, cell_m, r)
+    capped = bool(cap) and bool(counts.size) and int(counts.max()) > cap
     indptr = np.zeros(len(pts) + 1, dtype=np.int64)
-    np.cumsum(counts, out=indptr[1:])
+    np.cumsum(np.minimum(counts, cap) if capped else counts, out=indptr[1:])
     # Allocated by numpy (large arrays get transparent huge pages: fewer page faults than numba's).
     indices = np.empty(indptr[-1], dtype=np.int64)
     sqdist = np.empty(indptr[-1])
-    grid_fill(*grid, r, indptr, indices, sqdist)
-    return Neighborhoods(indptr, indices, sqdist, symmetric=True)
+    grid_fill(*grid, r, cap if capped else 0, indptr, indices, sqdist)
+    return Neighborhoods(indptr, indices, sqdist, symmetric=not capped)
 
 
 def _kdtree_radius(pts: np.ndarray, r: float) -> Neighborhoods:

@@ -10,6 +10,8 @@ criteria (section 4 of ``design/pcl-algorithms.md``) end the loop on an incremen
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
@@ -19,9 +21,10 @@ from ._coarse_kernels import umeyama_batch
 
 def icp_pcl(src: np.ndarray, tree: cKDTree, T0: np.ndarray, max_corr: float, max_iterations: int,
             transformation_epsilon: float, euclidean_fitness_epsilon: float = -np.inf,
-            mse_threshold_absolute: float = 1e-12, min_correspondences: int = 3,
+            mse_threshold_absolute: float = 1e-12, min_correspondences: int = 3, deadline: float = np.inf,
             ) -> tuple[np.ndarray, int, bool]:
-    """Run PCL's ``IterativeClosestPoint`` loop; returns ``(T_target_source, n_iterations, converged)``."""
+    """Run PCL's ``IterativeClosestPoint`` loop; returns ``(T_target_source, n_iterations, converged)``.
+    Stops, not converged, before an iteration that would start past ``deadline`` (a ``time.perf_counter()`` instant)."""
     tgt = tree.data
     T = np.array(T0, dtype=np.float64)
     moved = src @ T[:3, :3].T + T[:3, 3]
@@ -29,6 +32,8 @@ def icp_pcl(src: np.ndarray, tree: cKDTree, T0: np.ndarray, max_corr: float, max
     prev_mse = np.finfo(np.float64).max
     n_similar_needed = 0
     for it in range(1, max_iterations + 1):
+        if time.perf_counter() >= deadline:
+            return T, it - 1, False
         d, j = tree.query(moved, k=1, distance_upper_bound=max_corr)
         ok = d * d <= max_corr * max_corr
         if np.count_nonzero(ok) < min_correspondences:

@@ -24,6 +24,7 @@ from .result import RegistrationResult, inlier_statistics
 
 _CALLER = "align_prerejective"
 _SCORE_CHUNK_POINTS = 1 << 18
+_DEADLINE_CHUNK_POINTS = 1 << 16
 
 
 def align_prerejective(
@@ -45,6 +46,8 @@ def align_prerejective(
     target_tree: cKDTree | None = None,
     target_feature_tree: cKDTree | None = None,
     selection: str = "error",
+    deadline: float | None = None,
+    on_batch: Any = None,
 ) -> RegistrationResult:
     """Align ``source_points`` onto ``target_points`` from precomputed point features.
 
@@ -87,6 +90,13 @@ def align_prerejective(
         distance wins. ``"msac"``: the smallest truncated cost ``mean(min(d^2, max_correspondence_m^2))``
         over all source points wins, which rewards more inliers (better on small, self-similar objects;
         needs a finite ``max_correspondence_m``).
+    deadline : float, optional
+        A ``time.perf_counter()`` instant: no new batch of hypotheses is started after it (the time
+        budget of :func:`~semslam.registration.register`); ``extras["budget_exhausted"]`` then says so.
+        Hypotheses are then scored in chunks of ~2^16 source points, the deadline checked between them
+        (the hypotheses drawn, hence the result without a deadline, do not depend on it).
+    on_batch : callable, optional
+        Called as ``on_batch(n_drawn)`` after every batch (progress reporting).
 
     Returns
     -------
@@ -154,7 +164,13 @@ def align_prerejective(
         if frac[0] * n >= min_inliers:
             best_T, best_err, best_frac = T_init, float(err[0]), float(frac[0])
     n_drawn = n_rejected = n_scored = 0
+    exhausted = False
     while n_drawn < max_iterations:
+        if deadline is not None and time.perf_counter() >= deadline:
+            exhausted = True
+            break
+        if on_batch is not None and n_drawn:
+            on_batch(n_drawn)
         b = min(batch_size, max_iterations - n_drawn)
         n_drawn += b
         si = src_ok[K.sample_distinct(rng, len(src_ok), b, n_samples)]  # (b, n_samples) source indices
@@ -165,13 +181,22 @@ def align_prerejective(
         if not keep.any():
             continue
         R, t = K.umeyama_batch(src[si[keep]], tgt[ti[keep]])
-        Ts = K.transforms_from(R, t)
-        frac, err = _score(src, tree, Ts, max_corr, selection)
-        n_scored += len(Ts)
-        ok = np.flatnonzero((frac * n >= min_inliers) & (err < best_err))
-        if ok.size:
-            j = ok[np.argmin(err[ok])]
-            best_T, best_err, best_frac = Ts[j], float(err[j]), float(frac[j])
+        Ts_all = K.transforms_from(R, t)
+        # scored in chunks of ~2^16 points, the deadline checked between them (same result as one chunk)
+        chunk = len(Ts_all) if deadline is None else max(1, _DEADLINE_CHUNK_POINTS // max(1, n))
+        for c in range(0, len(Ts_all), chunk):
+            if c and deadline is not None and time.perf_counter() >= deadline:
+                exhausted = True
+                break
+            Ts = Ts_all[c:c + chunk]
+            frac, err = _score(src, tree, Ts, max_corr, selection)
+            n_scored += len(Ts)
+            ok = np.flatnonzero((frac * n >= min_inliers) & (err < best_err))
+            if ok.size:
+                j = ok[np.argmin(err[ok])]
+                best_T, best_err, best_frac = Ts[j], float(err[j]), float(frac[j])
+        if exhausted:
+            break
         if stop_fraction is not None and best_T is not None and best_frac >= stop_fraction:
             break
     t3 = time.perf_counter()
@@ -184,7 +209,8 @@ def align_prerejective(
         T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=n_drawn,
         converged=converged, n_inliers=n_in, max_correspondence_m=max_corr, method="prerejective",
         timings_ms={"feature_matching": 1e3 * (t2 - t1), "ransac": 1e3 * (t3 - t2), "total": 1e3 * (time.perf_counter() - t0)},
-        extras={"n_prerejected": n_rejected, "n_scored": n_scored, "best_error_m2": best_err if converged else None},
+        extras={"n_prerejected": n_rejected, "n_scored": n_scored, "best_error_m2": best_err if converged else None,
+                "budget_exhausted": exhausted},
     )
 
 

@@ -82,6 +82,7 @@ def align_icp(
     normals_k: int = 20,
     transformation_epsilon: float = 1e-8,
     euclidean_fitness_epsilon: float = -np.inf,
+    deadline: float | None = None,
 ) -> RegistrationResult:
     """Refine ``T_target_source`` by ICP (small_gicp, Gauss-Newton on SE(3), one thread).
 
@@ -111,6 +112,10 @@ def align_icp(
         translation, and ``1 - eps`` with the cosine of its rotation angle) and ``setEuclideanFitnessEpsilon``
         (relative MSE change; ``-inf`` = off, PCL's default). ``rotation_eps_rad`` and
         ``translation_eps_m`` are ignored then.
+    deadline : float, optional
+        ``"pcl"`` only: a ``time.perf_counter()`` instant after which no new iteration starts (the result
+        is then not converged and ``extras["budget_exhausted"]`` is True). The small_gicp variants run
+        their ``max_iterations`` uninterrupted.
 
     Returns
     -------
@@ -132,9 +137,11 @@ def align_icp(
         init_T.matrix if isinstance(init_T, RigidTransform) else RigidTransform(init_T).matrix)
     if target.method == "pcl":
         t1 = time.perf_counter()
+        end = np.inf if deadline is None else float(deadline)
         T, n_it, converged = icp_pcl(src, target.tree, T0, max_corr, max_iterations, float(transformation_epsilon),
-                                     float(euclidean_fitness_epsilon))
-        return _result(src, target, T, n_it, converged, max_corr, t0, t1, {})
+                                     float(euclidean_fitness_epsilon), deadline=end)
+        extras = {"budget_exhausted": True} if not converged and time.perf_counter() >= end else {}
+        return _result(src, target, T, n_it, converged, max_corr, t0, t1, extras)
     source = small_gicp.PointCloud(src)
     if target.method == "gicp":
         small_gicp.estimate_covariances(source, num_neighbors=normals_k)

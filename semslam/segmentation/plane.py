@@ -113,14 +113,26 @@ def _check_spread(pts: np.ndarray, caller: str, name: str = "points_xyz_m") -> N
         raise SegmentationError(
             f"The {name!r} argument of {caller} must hold at least 3 points to fit a plane. Got {len(pts)} instead."
         )
-    _, cov = _k.mean_and_covariance_all(pts)
-    eig = np.linalg.eigvalsh(cov)
+    eig = _spread_eigenvalues(pts)
+    if (not eig[2] > 0 or eig[1] <= 1e-12 * eig[2]) and len(pts) > 3:
+        # A few far outliers (one point at 1e9 m) dwarf the spread of all the others: judge the core instead.
+        lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
+        core = pts[((pts >= lo - (hi - lo)) & (pts <= hi + (hi - lo))).all(axis=1)]
+        if len(core) >= 3:
+            eig_core = _spread_eigenvalues(core)
+            if eig_core[2] > 0 and eig_core[1] > 1e-12 * eig_core[2]:
+                eig = eig_core
     if not eig[2] > 0 or eig[1] <= 1e-12 * eig[2]:
         what = "identical" if not eig[2] > 0 else "collinear"
         raise SegmentationError(
             f"The {name!r} argument of {caller} must not be degenerate: all {len(pts)} points are {what}, "
             "so no plane is defined."
         )
+
+
+def _spread_eigenvalues(pts: np.ndarray) -> np.ndarray:
+    _, cov = _k.mean_and_covariance_all(pts)
+    return np.linalg.eigvalsh(cov)
 
 
 def _orient(coefficients: np.ndarray) -> np.ndarray:

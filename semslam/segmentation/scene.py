@@ -216,9 +216,11 @@ def segment_scene(
         notes.append("empty input cloud: nothing to segment")
     elif cfg.max_planes > 0:
         try:
-            n = len(pts)
+            near = _near_points(pts)
+            plane_pts = pts if near is None else pts[near]
+            n = len(plane_pts)
             removal = _remove_planes(
-                pts,
+                plane_pts,
                 float(cfg.distance_threshold_m),
                 cfg.max_planes,
                 max(3, math.ceil(0.05 * n))
@@ -232,6 +234,11 @@ def segment_scene(
                 "remove_dominant_planes",
             )
             planes, remaining = removal.planes, removal.remaining_indices
+            if near is not None:  # far outliers are in no plane: back with the remaining points, in order
+                keep = np.ones(len(pts), dtype=bool)
+                keep[near[np.setdiff1d(np.arange(len(near)), remaining)]] = False
+                remaining = np.flatnonzero(keep)
+                notes.append(f"{len(pts) - len(near)} far outlier point(s) left out of the plane fit")
             if len(planes) < cfg.max_planes:
                 notes.append(
                     f"removed {len(planes)} of max {cfg.max_planes} planes: {removal.stop_reason}"
@@ -274,3 +281,18 @@ def segment_scene(
         notes,
         voxel_points,
     )
+
+
+#: Points farther than this many robust extents outside the 1-99 % box are left out of the plane fit.
+FAR_OUTLIER_EXTENTS = 10.0
+
+
+def _near_points(pts: np.ndarray) -> np.ndarray | None:
+    """Indices (increasing) of the points within ``FAR_OUTLIER_EXTENTS`` robust extents of the 1-99 percentile
+    box, or None when that is all of them: one point at 1e9 m must not change the planes RMSAC finds."""
+    if len(pts) < 100:
+        return None
+    lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
+    margin = FAR_OUTLIER_EXTENTS * float((hi - lo).max())
+    inside = ((pts >= lo - margin) & (pts <= hi + margin)).all(axis=1)
+    return None if inside.all() else np.flatnonzero(inside)
