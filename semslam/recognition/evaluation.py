@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 from typing import Any
 
@@ -139,15 +141,15 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         predicted = y[nearest]
         name = "chi2"
     else:
-        from joblib import Parallel, delayed
+        from .._workers import parallel_map
 
         check_int("n_jobs", n_jobs, caller="leave_one_out", minimum=-1)
         estimators = []
         for _ in range(len(y)):  # one fit per fold: inherent to leave-one-out; seeds drawn in fold order
             estimators.append(SvmClassifier(seed=int(rng.integers(2**31 - 1))) if classifier == "svm"
                               else _fresh(classifier))
-        jobs = Parallel(n_jobs=n_jobs or 1, return_as="generator")(
-            delayed(_fit_predict_fold)(est, X, y, i) for i, est in enumerate(estimators))
+        jobs = parallel_map(functools.partial(_fit_predict_fold_args, X=X, y=y), list(enumerate(estimators)),
+                            n_jobs or 1)
         folds = []
         with progress_steps(progress, len(estimators), "leave-one-out", "fold") as step:
             for fold in jobs:  # in fold order
@@ -165,6 +167,11 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
     recall = {lab: float(confusion[k, k] / totals[k]) if totals[k] else float("nan") for k, lab in enumerate(labels)}
     return EvaluationResult(labels, confusion, float(np.mean(predicted == y)), recall, y, predicted,
                             db.view_ids.astype(str), distances, descriptor, name, details)
+
+
+def _fit_predict_fold_args(item: tuple, *, X: np.ndarray, y: np.ndarray) -> tuple[str, dict | None]:
+    i, est = item
+    return _fit_predict_fold(est, X, y, i)
 
 
 def _fit_predict_fold(est: Any, X: np.ndarray, y: np.ndarray, i: int) -> tuple[str, dict | None]:
