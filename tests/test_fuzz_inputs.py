@@ -1,12 +1,14 @@
 """Derandomised fuzzing of every text input of a dive (issue 18, item 2): mission directories (mission.json and
 the CSV logs), vehicle and topic-map TOML, SLAM config files and detections files. Each case is a seeded
 mutation (bytes flipped, the file cut, lines duplicated or swapped, a number made huge or NaN, a value retyped);
-only a :class:`~semslam.errors.SemslamError` may escape, and each case ends within seconds."""
+only a :class:`~semslam.errors.SemslamError` may escape, each case ends within seconds and its peak allocation
+stays under 256 MiB."""
 
 from __future__ import annotations
 
 import shutil
 import time
+import tracemalloc
 import zlib
 
 import numpy as np
@@ -49,17 +51,30 @@ def _mutate(data: bytes, rng: np.random.Generator) -> bytes:
     return data.replace(b"[", b"{", 1)  # a type changed
 
 
+#: peak Python + numpy allocation of one case (tracemalloc sees numpy's buffers); the inputs are a few kB
+MAX_CASE_BYTES = 256 * 2**20
+
+
 def _only_semslam_errors(call, path, original: bytes, seed: int) -> int:
+    """Each mutated case: only a SemslamError escapes, it ends within 10 s and allocates at most
+    MAX_CASE_BYTES at its peak (a declared size or stamp gap that makes the reader allocate gigabytes fails)."""
     rng = np.random.default_rng(seed)
     failures = 0
-    for _ in range(N_CASES):
-        path.write_bytes(_mutate(original, rng))
-        t0 = time.perf_counter()
-        try:
-            call()
-        except SemslamError:
-            failures += 1
-        assert time.perf_counter() - t0 < 10.0
+    tracemalloc.start()
+    try:
+        for _ in range(N_CASES):
+            path.write_bytes(_mutate(original, rng))
+            tracemalloc.reset_peak()
+            t0 = time.perf_counter()
+            try:
+                call()
+            except SemslamError:
+                failures += 1
+            assert time.perf_counter() - t0 < 10.0
+            peak = tracemalloc.get_traced_memory()[1]
+            assert peak < MAX_CASE_BYTES, f"a case of {path.name} allocated {peak / 2**20:.0f} MiB"
+    finally:
+        tracemalloc.stop()
     path.write_bytes(original)
     return failures
 
