@@ -123,6 +123,7 @@ class SlamSession:
                                   else np.asarray(cfg.motion.unknown_velocity_sigma_mps, dtype=float), (3,))
         var0 = [init.initial_position_sigma_m ** 2] * 3 + [float(x) ** 2 for x in v_sigma]
         self._last_dvl_s = self._t0 if self._v_known else -math.inf  #: last accepted DVL sample (unaided after it)
+        self._was_unaided = False
         if calib:
             var0 += [max(d.bias_sigma_mps, 1e-6) ** 2] * 3 + [1e-12] * 3 + [max(d.scale_factor_sigma, 1e-6) ** 2,
                                                                           max(d.misalignment_sigma_rad, 1e-6) ** 2]
@@ -230,10 +231,13 @@ class SlamSession:
                 continue
             self._history_before(t)
             self._predict_to(t)
-            if self.ekf._N is not None and t - self._last_dvl_s > self.cfg.motion.unaided_after_s:
+            if self.ekf._N is not None and (self._was_unaided or t - self._last_dvl_s > self.cfg.motion.unaided_after_s):
+                self._was_unaided = True
                 # unaided, the velocity the null direction was propagated with may have been far off: re-anchor it
                 # on the current estimate (a rotation about the vehicle now; the launch prior is not a measurement)
-                # so that the projection removes the direction the measurements really cannot see
+                # so that the projection removes the direction the measurements really cannot see. Once unaided,
+                # for the rest of the run: a direction propagated on from an outage's estimates made the filter
+                # overconfident (first-half outage, 30 runs: ANEES 27 with the constraint resumed, 3.3 without)
                 self.ekf.constrain_heading_nullspace(True)
             if kind == "dvl":
                 self._update_dvl(t, *payload)
