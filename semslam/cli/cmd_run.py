@@ -21,6 +21,8 @@ def register(subparsers, common) -> None:
     p.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="message definitions (bags)")
     p.add_argument("--mode", default="all", help="SLAM mode: dr, position, pose, pose+heading or all (default)")
     p.add_argument("--seed", type=int, default=0, help="seed of recognition and SLAM (default 0)")
+    p.add_argument("--backend", choices=("ekf", "isam2", "batch"), default="ekf",
+                   help="SLAM estimator: the EKF (default), or a GTSAM factor graph: isam2 (online) or batch")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     p.set_defaults(func=run)
 
@@ -84,7 +86,7 @@ def _run(args: argparse.Namespace, out, modes):
     metrics = {}
     for mode in modes:
         res = run_slam(dataset, found.detections_by_scan, mode=mode, config=SlamConfig(), seed=args.seed,
-                       symmetries=db.symmetries())
+                       symmetries=db.symmetries(), backend=args.backend)
         write_run(res, mode_dir(out, mode))
         origin = (dataset.metadata.get("source") or {}).get("time_origin_ns", 0)
         export_run(res, mode_dir(out, mode), detections_by_scan=found.detections_by_scan or None,

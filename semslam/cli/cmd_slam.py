@@ -8,6 +8,7 @@ from pathlib import Path
 from ..slam.config import MODES
 
 MODE_CHOICES = (*MODES, "all")
+BACKEND_CHOICES = ("ekf", "isam2", "batch")
 
 
 def register(subparsers, common) -> None:
@@ -29,6 +30,8 @@ def register(subparsers, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the truth-based detections (default 0)")
     p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
                    help="name of a mission object whose pose is known a priori (surveyed reference structure); repeatable")
+    p.add_argument("--backend", choices=BACKEND_CHOICES, default="ekf",
+                   help="estimator: the EKF (default), or a GTSAM factor graph: isam2 (online smoothing) or batch")
     p.set_defaults(func=run)
 
     q = subparsers.add_parser("montecarlo", parents=[common], help="seeded Monte-Carlo evaluation of the filter modes",
@@ -52,6 +55,11 @@ def register(subparsers, common) -> None:
                         "(default: SlamConfig's, 0.001)")
     q.add_argument("--no-smooth", action="store_true", help="skip the RTS-smoothed trajectories")
     q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves")
+    q.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="worker processes of a local Dask cluster (default 1: serial, in this process); same results")
+    q.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (tcp://host:8786)")
+    q.add_argument("--backend", choices=BACKEND_CHOICES, default="ekf",
+                   help="estimator: the EKF (default), or a GTSAM factor graph: isam2 or batch")
     q.set_defaults(func=run_montecarlo_cmd)
 
 
@@ -88,11 +96,12 @@ def run(args: argparse.Namespace) -> int:
     with staged_output_dir(final, overwrite=args.overwrite) as out:
         for mode in modes:
             if dets is None:
-                from ..simulation.truth_slam import run_truth_slam
+                from ..experiments.montecarlo import truth_run
 
-                res = run_truth_slam(mission, mode=mode, config=cfg, seed=args.seed)
+                res = truth_run(mission, mode, cfg, args.seed, args.backend)
             else:
-                res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries)
+                res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries,
+                               backend=args.backend)
             where = mode_dir(out, mode) if len(modes) > 1 else out
             write_run(res, where)
             if args.export:
@@ -137,8 +146,8 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
     res = run_montecarlo(args.runs, modes=modes, yaw_bias_deg=args.yaw_bias_deg, seed=args.seed, source=args.source,
                          loops=args.loops, log=None if getattr(args, "json", False) else
                          (lambda s: print(s, file=sys.stderr)), yaw_bias_walk_deg_per_sqrt_s=args.yaw_bias_walk,
-                         white_dvl=args.white_dvl,
-                         config_overrides=overrides or None)
+                         white_dvl=args.white_dvl, jobs=args.jobs, scheduler=args.scheduler,
+                         config_overrides=overrides or None, backend=args.backend)
     if args.out:
         write_montecarlo(res, args.out)
     emit(args, {"n_runs": res.n_runs, "summary": res.summary}, res.table)

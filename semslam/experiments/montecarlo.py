@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -94,17 +95,59 @@ class MonteCarloResult:
         return "\n".join(rows)
 
 
+def truth_run(mission, mode: str, config: SlamConfig, seed: int, backend: str = "ekf"):
+    """:func:`run_truth_slam` on ``backend`` (``ekf``, ``isam2``, ``batch``): the same truth-based detections and
+    seeds for every backend."""
+    if backend == "ekf":
+        return run_truth_slam(mission, mode=mode, config=config, seed=seed)
+    from .._validation import as_rng
+    from ..simulation.detections import simulate_detections
+    from ..simulation.truth_slam import builtin_symmetries, truth_detection_config
+    from ..slam import run_slam
+
+    sym = builtin_symmetries()
+    rng = as_rng(seed, caller="truth_run")
+    dets = {} if mode == "dr" else simulate_detections(mission, truth_detection_config(mission), seed=rng, symmetries=sym)
+    return run_slam(mission, dets, mode=mode, config=config, seed=seed, symmetries=sym, backend=backend)
+
+
+def _montecarlo_run(i: int, *, opts: dict) -> dict:
+    """Run ``i`` of :func:`run_montecarlo` (one mission, every mode): per mode the per-epoch NEES (online, smoothed),
+    3-sigma bound, error, relative stamps and the metrics. A Dask task: small arguments, small result."""
+    seed = opts["seed"] + i
+    mission = make_mission(seed, yaw_bias_rad=opts["yaw_bias_rad"], source=opts["source"], loops=opts["loops"],
+                           yaw_bias_walk_rad_per_sqrt_s=opts["yaw_bias_walk_rad_per_sqrt_s"], white_dvl=opts["white_dvl"])
+    cfg = SlamConfig().updated(**opts["config_overrides"])
+    out = {}
+    for mode in opts["modes"]:
+        res = truth_run(mission, mode, cfg, seed, opts.get("backend", "ekf"))
+        if res.truth_position_ned_m is None:
+            raise SlamError("Monte-Carlo runs need missions with ground truth.")
+        e = res.position_ned_m - res.truth_position_ned_m
+        smoothed = None if res.smoothed_position_ned_m is None else nees(
+            res.smoothed_position_ned_m - res.truth_position_ned_m, res.smoothed_position_cov_m2)
+        out[mode] = {"nees": nees(e, res.position_cov_m2), "nees_smoothed": smoothed,
+                     "sigma3": 3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)),
+                     "error": np.linalg.norm(e, axis=1), "metrics": res.metrics,
+                     "stamps_s": res.stamps_s - res.stamps_s[0]}
+    return out
+
+
 def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_deg: float = 0.0, seed: int = 0,
                    source: str = "auto", loops: int = 3, config_overrides: dict | None = None,
                    progress: Progress = False, log: Callable[[str], None] | None = None,
                    yaw_bias_walk_deg_per_sqrt_s: float = 0.0,
-                   white_dvl: bool = False) -> MonteCarloResult:
+                   white_dvl: bool = False, jobs: int = 1, scheduler: str | None = None,
+                   client=None, backend: str = "ekf") -> MonteCarloResult:
     """Run ``n_runs`` seeded missions in each of ``modes``; see the module docstring.
 
     ``yaw_bias_deg`` / ``yaw_bias_walk_deg_per_sqrt_s``: AHRS yaw bias of the missions (constant, random walk);
     ``config_overrides``: SlamConfig settings (e.g. ``{"surveyed_objects": ["reducing_socket_0"]}``);
     ``progress``: a bar or ``progress(done, total)`` per run and mode (:mod:`semslam._progress`); ``log``: one line
-    per run and mode (its ATE).
+    per run and mode (its ATE). ``jobs`` / ``scheduler`` / ``client``: the engine (serial in this process, a local Dask
+    cluster of ``jobs`` processes, a running cluster; :func:`semslam.experiments._dask.map_tasks`): same result.
+    ``backend``: the estimator (``ekf``; ``isam2`` or ``batch``: the GTSAM factor graph, whose smoothed trajectory
+    is its whole-dive estimate), with the same missions and detections for every backend.
     Summary per mode: ATE (mean, median, max), DR/mode ATE ratio, final error, mean 3-sigma at 1/3, 2/3 and
     the end of the mission, position ANEES with its band and the fraction of epochs in it, and the landmark
     ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
@@ -117,35 +160,40 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     for mode in modes:
         if mode not in MODES:
             raise SlamError(f"The 'modes' argument of run_montecarlo must contain only {MODES}. Got {mode!r} instead.")
+    if backend not in ("ekf", "isam2", "batch"):
+        raise SlamError(f"The 'backend' argument of run_montecarlo must be one of ('ekf', 'isam2', 'batch'). "
+                        f"Got {backend!r} instead.")
     nees_r: dict = {m: [] for m in modes}
     nees_s: dict = {m: [] for m in modes}
     sig_r: dict = {m: [] for m in modes}
     err_r: dict = {m: [] for m in modes}
     met: dict = {m: [] for m in modes}
     stamps = None
+    opts = {"seed": seed, "modes": modes, "yaw_bias_rad": math.radians(yaw_bias_deg), "source": source, "loops": loops,
+            "yaw_bias_walk_rad_per_sqrt_s": math.radians(yaw_bias_walk_deg_per_sqrt_s), "white_dvl": white_dvl,
+            "config_overrides": dict(config_overrides or {}), "backend": backend}
     with progress_steps(progress, n_runs * len(modes), "Monte Carlo", "run") as step:
-        for i in range(n_runs):
-            mission = make_mission(seed + i, yaw_bias_rad=math.radians(yaw_bias_deg), source=source, loops=loops,
-                                   yaw_bias_walk_rad_per_sqrt_s=math.radians(yaw_bias_walk_deg_per_sqrt_s),
-                                   white_dvl=white_dvl)
-            cfg = SlamConfig().updated(**(config_overrides or {}))
+        def done(i: int, run: dict) -> None:  # as each run ends (in any order on a cluster)
             for mode in modes:
-                res = run_truth_slam(mission, mode=mode, config=cfg, seed=seed + i)
-                if res.truth_position_ned_m is None:
-                    raise SlamError("Monte-Carlo runs need missions with ground truth.")
-                e = res.position_ned_m - res.truth_position_ned_m
-                nees_r[mode].append(nees(e, res.position_cov_m2))
-                if res.smoothed_position_ned_m is not None:
-                    nees_s[mode].append(nees(res.smoothed_position_ned_m - res.truth_position_ned_m,
-                                             res.smoothed_position_cov_m2))
-                sig_r[mode].append(3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)))
-                err_r[mode].append(np.linalg.norm(e, axis=1))
-                met[mode].append(res.metrics)
-                if stamps is None or len(res.stamps_s) < len(stamps):
-                    stamps = res.stamps_s - res.stamps_s[0]
                 step()
                 if log is not None:
-                    log(f"run {i + 1}/{n_runs} {mode}: ATE {res.metrics['ate_rmse_m']:.4f} m")
+                    log(f"run {i + 1}/{n_runs} {mode}: ATE {run[mode]['metrics']['ate_rmse_m']:.4f} m")
+
+        from ._dask import map_tasks
+
+        runs = map_tasks(partial(_montecarlo_run, opts=opts), range(n_runs), jobs=jobs, scheduler=scheduler,
+                         client=client, on_result=done)
+    for run in runs:  # in run order, whatever the engine: the summary does not depend on it
+        for mode in modes:
+            r = run[mode]
+            nees_r[mode].append(r["nees"])
+            if r["nees_smoothed"] is not None:
+                nees_s[mode].append(r["nees_smoothed"])
+            sig_r[mode].append(r["sigma3"])
+            err_r[mode].append(r["error"])
+            met[mode].append(r["metrics"])
+            if stamps is None or len(r["stamps_s"]) < len(stamps):
+                stamps = r["stamps_s"]
     K = len(stamps)
     summary = {}
     out = {}

@@ -5,6 +5,9 @@ config, seed) -> SlamResult`` is the loop over a whole :class:`~semslam.dataset.
 run directory (:mod:`semslam.slam.rundir`). Modules: ``session`` (time and events), ``sensors`` (attitude
 input, DVL, depth models), ``mapping`` (association, landmark updates, consensus initialisation), ``ekf`` (the
 filter and its named state blocks), ``smoother`` (RTS), ``evaluation`` (against ground truth).
+
+Backends: ``run_slam(..., backend="ekf" | "isam2" | "batch")``; the factor-graph ones live in
+:mod:`semslam.slam.graph` (``GraphSession``, same interface as ``SlamSession``; imported on demand: GTSAM).
 """
 
 from .association import ObjectMeasurement, associate, associate_jcbb, innovation, measurement_from_detection
