@@ -66,6 +66,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     build.add_argument("--vfh-variant", default=None, help="VFH binning variant (default: the descriptors' default)")
     build.add_argument("--esf-samples", type=int, default=20000, help="ESF point-triplet samples (default 20000)")
     build.add_argument("--progress", action="store_true", help="show a progress bar")
+    build.add_argument("--jobs", type=int, default=1, metavar="N",
+                       help="worker processes of a local Dask cluster for the descriptors (default 1: in this "
+                            "process); the same database either way")
+    build.add_argument("--scheduler", metavar="ADDRESS",
+                       help="compute the descriptors on the Dask cluster of this scheduler (tcp://host:8786)")
     build.set_defaults(func=run_build)
 
     info = sub.add_parser("info", parents=[common], help="describe a database file",
@@ -91,6 +96,12 @@ def run_build(args: argparse.Namespace) -> int:
               "esf_n_samples": args.esf_samples,
               "voxel_leaf_m": args.voxel if args.voxel == "auto" or args.voxel > 0 else None,
               "seed": args.seed, "progress": args.progress}
+    if args.jobs != 1 or args.scheduler:
+        from functools import partial
+
+        from ..experiments._dask import check_jobs
+
+        kwargs["mapper"] = partial(_dask_mapper, jobs=check_jobs(args.jobs), scheduler=args.scheduler)
     if args.builtin:
         import math
 
@@ -121,6 +132,13 @@ def run_build(args: argparse.Namespace) -> int:
     emit(args, payload, lambda: f"wrote {path}: {db.n_views} views of {len(db.classes)} classes "
                                 f"({', '.join(db.classes)}) in {payload['seconds']:.1f} s")
     return 0
+
+
+def _dask_mapper(fn, items, progress, *, jobs: int, scheduler: str | None):
+    """``build_database``'s ``mapper`` on Dask (a local cluster of ``jobs`` workers, or ``scheduler``'s)."""
+    from ..experiments._dask import map_tasks
+
+    return map_tasks(fn, items, jobs=jobs, scheduler=scheduler, progress=progress, desc="descriptors")
 
 
 def _build_from_models(args: argparse.Namespace, kwargs: dict):

@@ -34,6 +34,7 @@ import zlib
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -527,7 +528,8 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
                    vfh_variant: str | None = None, normal_radius_m: float | str = DEFAULT_NORMAL_RADIUS_M,
                    esf_n_samples: int = 20000, voxel_leaf_m: float | str | None = DEFAULT_VOXEL_LEAF_M,
                    seed: int | np.random.Generator = 0, progress: bool = False,
-                   model_views: Sequence[tuple[str, str, PointCloud]] | None = None) -> ViewDatabase:
+                   model_views: Sequence[tuple[str, str, PointCloud]] | None = None,
+                   mapper: Any = None) -> ViewDatabase:
     """Compute the descriptors of partial views and gather them in a :class:`ViewDatabase`.
 
     Parameters
@@ -562,6 +564,10 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         Pose-model views (object frame, with viewpoints), stored without descriptors: pose estimation
         fuses them instead of the recognition views of their class (:meth:`ViewDatabase.pose_views`).
         Classes without any keep their recognition views as pose model.
+    mapper : callable, optional
+        ``mapper(fn, items, progress) -> [fn(item) for item in items]`` in order: runs the views' descriptors
+        elsewhere (e.g. :func:`semslam.experiments._dask.map_tasks` on a Dask cluster); every view carries its own
+        seed, so the database does not depend on it. Default: in this process.
     """
     caller = "build_database"
     if not _is_auto(normal_radius_m):  # lengths checked before the views; "auto" is measured once they are
@@ -587,16 +593,11 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     view_seeds = rng.integers(0, 2**31 - 1, size=len(views))
     esf = np.empty((len(views), ESF_BINS), np.float32)
     vfh = np.empty((len(views), VFH_BINS), np.float32)
-    with progress_steps(progress, len(views), "descriptors", "view") as step:
-        for k, (label, view_id, cloud) in enumerate(views):
-            try:
-                d = compute_view_descriptors(cloud, vfh_variant=variant, normal_radius_m=radius,
-                                             esf_n_samples=n_samples, voxel_leaf_m=leaf, seed=int(view_seeds[k]),
-                                             vfh_scale=lengths["vfh_scale"])
-            except SemslamError as exc:
-                raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
-            esf[k], vfh[k] = d.esf, d.vfh
-            step()
+    task = partial(_describe_view, vfh_variant=variant, normal_radius_m=radius, esf_n_samples=n_samples,
+                   voxel_leaf_m=leaf, vfh_scale=lengths["vfh_scale"])
+    items = [(label, view_id, cloud, int(view_seeds[k])) for k, (label, view_id, cloud) in enumerate(views)]
+    for k, d in enumerate((mapper or _map_here)(task, items, progress)):
+        esf[k], vfh[k] = d.esf, d.vfh
     counts = np.array([v[2].n_points for v in views], dtype=np.int64)
     params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
               "seed": seed if isinstance(seed, int) else None}
@@ -619,6 +620,24 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
                             else np.zeros((0, 3))).astype(np.float32),
         model_viewpoints_xyz_m=np.array([m[2].viewpoint_xyz_m for m in models], dtype=np.float64).reshape(-1, 3),
     )
+
+
+def _describe_view(item: tuple, **kwargs: Any) -> ViewDescriptors:
+    """The descriptors of one ``(label, view_id, cloud, seed)`` view of :func:`build_database` (a picklable task)."""
+    label, view_id, cloud, seed = item
+    try:
+        return compute_view_descriptors(cloud, seed=seed, **kwargs)
+    except SemslamError as exc:
+        raise type(exc)(f"View ({label!r}, {view_id!r}): {exc}") from exc
+
+
+def _map_here(fn: Any, items: list, progress: Any) -> list:
+    out = []
+    with progress_steps(progress, len(items), "descriptors", "view") as step:
+        for item in items:
+            out.append(fn(item))
+            step()
+    return out
 
 
 def _check_model_views(model_views: Any, class_infos: Mapping[str, ClassInfo], caller: str) -> list:
