@@ -76,3 +76,23 @@ def pcl_ref() -> str:
         if c and os.access(c, os.X_OK):
             return c
     _missing("pcl_ref oracle not built (run ../shared/pcl_oracle/build.sh)", "SEMSLAM_REQUIRE_PCL")
+
+
+@pytest.fixture(scope="module")
+def client():
+    """A Dask LocalCluster of 2 worker processes with 1 thread each (the engine tests); after the module, every
+    worker process must be gone."""
+    import psutil
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    c = Client(cluster)
+    pids = set(c.run(os.getpid).values())
+    try:
+        yield c
+    finally:
+        pids |= set(c.run(os.getpid).values())
+        c.close()
+        cluster.close()
+        _, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=10)
+        assert not alive, f"worker processes survived the cluster: {alive}"

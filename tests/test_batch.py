@@ -13,7 +13,6 @@ import threading
 import time
 from pathlib import Path
 
-import psutil
 import pytest
 
 from semslam._outdir import MARKER
@@ -45,23 +44,6 @@ def dives(tmp_path_factory):
     (models / "models.toml").write_text('[elbow]\nfile = "elbow.stl"\nunit = "mm"\nsymmetry = "none"\n')
     db = save_database(build_models_database(models, n_views=2, n_model_views=1, esf_n_samples=2000), root / "db.npz")
     return [str(out[0]), str(bad), str(out[1])], str(db)
-
-
-@pytest.fixture(scope="module")
-def client():
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
-    c = Client(cluster)
-    pids = set(c.run(os.getpid).values())
-    try:
-        yield c
-    finally:
-        pids |= set(c.run(os.getpid).values())
-        c.close()
-        cluster.close()
-        _, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=10)
-        assert not alive, f"worker processes survived the cluster: {alive}"
 
 
 @pytest.fixture(scope="module")

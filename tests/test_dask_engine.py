@@ -21,23 +21,6 @@ from semslam.experiments._dask import TaskFailed, check_jobs, map_tasks
 DATA = Path(__file__).parent / "data"
 
 
-@pytest.fixture(scope="module")
-def client():
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
-    c = Client(cluster)
-    pids = set(c.run(os.getpid).values())
-    try:
-        yield c
-    finally:
-        pids |= set(c.run(os.getpid).values())
-        c.close()
-        cluster.close()
-        gone, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=10)
-        assert not alive, f"worker processes survived the cluster: {alive}"
-
-
 def test_serial_and_cluster_give_ordered_results(client):
     items = [0.3, 0.0, 0.1, 0.2]  # the first finishes last
     serial = map_tasks(abs, [-x for x in items])

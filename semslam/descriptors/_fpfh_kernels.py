@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ._neighbors_kernels import _block, _bucket, cell_end, gather
-from ._pair_kernels import N_BINS, _add_pair, _bin, pair_features, pair_features_sym
+from ._pair_kernels import N_BINS, _add_pair, _bin, _fpfh_row, pair_features, pair_features_sym
 
 
 @njit(cache=True, nogil=True)
@@ -110,25 +110,3 @@ def _spfh_row(points, normals, valid, skip_invalid, i, nbrs, m, out):  # pragma:
         out[i, _bin(N_BINS * ((f1 + math.pi) / (2.0 * math.pi)), N_BINS)] += incr
         out[i, N_BINS + _bin(N_BINS * ((f2 + 1.0) * 0.5), N_BINS)] += incr
         out[i, 2 * N_BINS + _bin(N_BINS * ((f3 + 1.0) * 0.5), N_BINS)] += incr
-
-
-@njit(cache=True, inline="always")
-def _fpfh_row(spfh, i, nbrs, sqd, m, out):  # pragma: no cover - compiled
-    """One row of :func:`~._pair_kernels.fpfh_from_spfh` from ``nbrs[:m]`` and their squared distances."""
-    nb = spfh.shape[1]
-    for u in range(m):
-        d2 = sqd[u]
-        if d2 == 0.0:
-            continue
-        w = 1.0 / d2
-        j = nbrs[u]
-        for b in range(nb):
-            out[i, b] += spfh[j, b] * w
-    for blk in range(3):
-        s = 0.0
-        for b in range(blk * N_BINS, (blk + 1) * N_BINS):
-            s += out[i, b]
-        if s != 0.0:
-            s = 100.0 / s
-            for b in range(blk * N_BINS, (blk + 1) * N_BINS):
-                out[i, b] *= s

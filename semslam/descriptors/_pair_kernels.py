@@ -161,26 +161,33 @@ def fpfh_from_spfh(spfh_hist, indptr, indices, sqdist):  # pragma: no cover - co
     11-bin block rescaled to sum to 100 (left zero when empty), as PCL's ``weightPointSPFHSignature``.
     """
     n = len(indptr) - 1
-    nb = spfh_hist.shape[1]
-    out = np.zeros((n, nb))
+    out = np.zeros((n, spfh_hist.shape[1]))
     for i in range(n):
-        for t in range(indptr[i], indptr[i + 1]):
-            d2 = sqdist[t]
-            if d2 == 0.0:
-                continue
-            w = 1.0 / d2
-            j = indices[t]
-            for b in range(nb):
-                out[i, b] += spfh_hist[j, b] * w
-        for blk in range(3):
-            s = 0.0
-            for b in range(blk * N_BINS, (blk + 1) * N_BINS):
-                s += out[i, b]
-            if s != 0.0:
-                s = 100.0 / s
-                for b in range(blk * N_BINS, (blk + 1) * N_BINS):
-                    out[i, b] *= s
+        a, e = indptr[i], indptr[i + 1]
+        _fpfh_row(spfh_hist, i, indices[a:e], sqdist[a:e], e - a, out)
     return out
+
+
+@njit(cache=True, inline="always")
+def _fpfh_row(spfh, i, nbrs, sqd, m, out):  # pragma: no cover - compiled
+    """One row of :func:`fpfh_from_spfh` from ``nbrs[:m]`` and their squared distances."""
+    nb = spfh.shape[1]
+    for u in range(m):
+        d2 = sqd[u]
+        if d2 == 0.0:
+            continue
+        w = 1.0 / d2
+        j = nbrs[u]
+        for b in range(nb):
+            out[i, b] += spfh[j, b] * w
+    for blk in range(3):
+        s = 0.0
+        for b in range(blk * N_BINS, (blk + 1) * N_BINS):
+            s += out[i, b]
+        if s != 0.0:
+            s = 100.0 / s
+            for b in range(blk * N_BINS, (blk + 1) * N_BINS):
+                out[i, b] *= s
 
 
 # ---------------------------------------------------------------------------------------------------------------
