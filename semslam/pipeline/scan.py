@@ -275,10 +275,28 @@ class ScanRecognizer:
                                           slack_m=cfg.size_slack_m) for c in self.db.classes)
 
     def warm_up(self) -> None:
-        """Prepare every class's pose model now (so that the first scan is not slower than the others)."""
+        """Prepare every class's pose model now, recognise one database view and estimate the pose of one
+        view of every class (it loads the segmentation, descriptor, search and ICP kernels: ~50 ms), so that
+        the first scans are not slower than the others (benchmarks/latency.py). No result changes."""
+        from ..errors import SemslamError
+
         for label in self.db.classes:
             first = int(self.db.views_of(label)[0])
             self.pose_model(label, first)
+        if not self.config.estimate_pose:
+            return
+        for i, label in enumerate(self.db.classes):  # every class: the symmetry kinds take different paths
+            first = int(self.db.views_of(label)[0])
+            view = self.db.view_cloud(first)
+            try:  # a view is a valid cluster; any failure only means the kernels load on the first scan
+                if i == 0:
+                    self.recognize(view, seed=0)  # segmentation, border and plausibility kernels
+                    self.recognizer.match_descriptors(self.db.describe(view, seed=0))
+                estimate_object_pose(view.points_xyz_m, self.pose_model(label, first),
+                                     symmetry=self.db.class_info(label).symmetry, config=self.config.pose, seed=0,
+                                     viewpoint_xyz_m=view.viewpoint_xyz_m)
+            except SemslamError:
+                pass
 
     def _nearest_view_of(self, label: str, x: np.ndarray) -> int:
         """The view of class ``label`` nearest (chi-square) to the descriptor row ``x``."""

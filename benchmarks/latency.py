@@ -1,0 +1,138 @@
+"""Tail latency of scan -> detections (issue #18, item 5): p50 / p90 / p99 over the default mission's scans,
+warm (the recognizer prepared as the demo does it, the first scan dropped), and the wall time of a cold
+single-scan ``semslam recognize SCAN --db DB`` (a fresh process: best of N) with its ``timings_ms``.
+
+Run from the repository root (the demo's mission and database; ``semslam demo --quick --out DIR`` makes
+them when ``runs/demo`` has none)::
+
+    .venv/bin/python benchmarks/latency.py                                   # runs/demo, warm + cold
+    .venv/bin/python benchmarks/latency.py --run runs/demo --repeat 3 --cold-scans 10 40
+    .venv/bin/python benchmarks/latency.py --only warm --warm-up models     # the warm-up before issue #18
+    .venv/bin/python benchmarks/latency.py --only cold
+
+Every figure is printed with the machine's load average (``os.getloadavg``): the latencies are only
+comparable at a similar load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _load() -> str:
+    return "load %.2f %.2f %.2f" % os.getloadavg()
+
+
+def _pct(x) -> str:
+    x = np.asarray(x, dtype=float)
+    p50, p90, p99 = np.percentile(x, [50, 90, 99])
+    return f"p50 {p50:.1f} ms, p90 {p90:.1f} ms ({p90 / p50:.2f}x), p99 {p99:.1f} ms, max {x.max():.1f} ms"
+
+
+def warm(args) -> None:
+    from semslam.cli._inputs import load_dataset
+    from semslam.pipeline import PipelineConfig, ScanRecognizer
+    from semslam.pipeline.mission import scan_seed
+    from semslam.recognition import load_database
+
+    run = Path(args.run)
+    cfg = json.loads((run / "config.json").read_text()).get("demo", {}) if (run / "config.json").is_file() else {}
+    db = load_database(run / "db.npz")
+    ds = load_dataset(str(run / "mission"))
+    pipe = PipelineConfig(descriptor=cfg.get("descriptor", "esf+vfh"), classifier=cfg.get("classifier", "chi2"))
+    seed = int(cfg.get("seed", 0))
+    clouds = [(rec, ds.load_scan(rec.scan_id)) for rec in ds.scans]  # read first: time recognition only
+    print(f"\n## Warm scan -> detections ({run}, {len(clouds)} scans, descriptor {pipe.descriptor}, "
+          f"classifier {pipe.classifier}, warm-up {args.warm_up})\n")
+    for rep in range(args.repeat):
+        rec_ = ScanRecognizer(db, pipe, seed=seed)
+        if args.warm_up == "models":  # the warm-up before issue #18: the pose models only
+            for label in db.classes:
+                rec_.pose_model(label, int(db.views_of(label)[0]))
+        else:
+            rec_.warm_up()  # as the demo does
+        load0 = _load()
+        rows = []
+        for rec, cloud in clouds:
+            stamps = ds.point_stamps_s(rec, cloud)
+            g0 = sum(s["collections"] for s in gc.get_stats())
+            t0 = time.perf_counter()
+            r = rec_.recognize(cloud, seed=scan_seed(seed, rec.scan_id), stamp_s=rec.end_stamp_s, scan_id=rec.scan_id,
+                               point_stamps_s=stamps)
+            wall = (time.perf_counter() - t0) * 1e3
+            g1 = sum(s["collections"] for s in gc.get_stats())
+            t = r.timings_ms
+            rows.append((wall, t["total"], t["segmentation"], t["descriptors"], t["pose"], len(r.clusters),
+                         len(r.detections), g1 - g0, rec.scan_id))
+        a = np.array(rows)[1:]  # warm: after a first scan
+        print(f"repeat {rep + 1}: first scan {rows[0][0]:.1f} ms; every scan (as the demo's recognition.json): "
+              f"{_pct(np.array(rows)[:, 1])}")
+        print(f"repeat {rep + 1} ({load0} -> {_load()}): wall {_pct(a[:, 0])}")
+        print(f"  timings_ms total: {_pct(a[:, 1])}")
+        for name, col in (("segmentation", 2), ("descriptors", 3), ("pose", 4)):
+            print(f"  {name}: {_pct(a[:, col])}")
+        slow = a[:, 0] > np.percentile(a[:, 0], 90)
+        print(f"  scans above p90: {int(slow.sum())}; their mean clusters {a[slow, 5].mean():.1f} / detections "
+              f"{a[slow, 6].mean():.1f} / GC runs {a[slow, 7].mean():.1f}, against {a[~slow, 5].mean():.1f} / "
+              f"{a[~slow, 6].mean():.1f} / {a[~slow, 7].mean():.1f} for the others")
+        top = np.argsort(-a[:, 0])[:3]
+        print("  slowest: " + "; ".join(f"scan {int(a[i, 8])} {a[i, 0]:.1f} ms (seg {a[i, 2]:.1f}, desc {a[i, 3]:.1f}, "
+                                        f"pose {a[i, 4]:.1f}, {int(a[i, 6])} det, {int(a[i, 7])} GC)" for i in top))
+        by_det = {int(n): np.median(a[a[:, 6] == n, 0]) for n in np.unique(a[:, 6])}
+        print("  median wall by detections per scan: " + ", ".join(f"{n}: {v:.1f} ms ({int((a[:, 6] == n).sum())} scans)"
+                                                                for n, v in by_det.items()))
+
+
+def cold(args) -> None:
+    run = Path(args.run)
+    exe = str(Path(sys.executable).with_name("semslam"))
+    print(f"\n## Cold `semslam recognize SCAN --db {run / 'db.npz'} --json` (fresh process, best of {args.cold_repeat})\n")
+    for sid in args.cold_scans:
+        scan = run / "mission" / "scans" / f"scan_{sid:05d}.pcd"
+        best, all_ms = None, []
+        for _ in range(args.cold_repeat):
+            load0 = _load()
+            t0 = time.perf_counter()
+            out = subprocess.run([exe, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"], check=True,
+                                 capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            payload = json.loads(out.stdout)
+            t = payload["timings_ms"]
+            in_process = t["load_db"] + t["total"]
+            all_ms.append((in_process, wall))
+            if best is None or in_process < best[0]:
+                best = (in_process, wall, t, len(payload["detections"]), load0)
+        in_process, wall, t, n_det, load0 = best
+        med = np.median(np.array(all_ms), axis=0)
+        print(f"scan {sid} ({n_det} detections, {load0}): load_db + recognize best {in_process:.0f} ms (median "
+              f"{med[0]:.0f}), process wall {wall:.2f} s (median {med[1]:.2f}); best: "
+              + ", ".join(f"{k} {v:.0f}" for k, v in t.items()))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", default="runs/demo", help="a demo output directory (mission/ and db.npz)")
+    ap.add_argument("--only", choices=("warm", "cold"))
+    ap.add_argument("--repeat", type=int, default=1, help="passes over the mission (warm)")
+    ap.add_argument("--warm-up", choices=("full", "models"), default="full",
+                    help="ScanRecognizer.warm_up (full) or only the pose models prepared (models: as before issue #18)")
+    ap.add_argument("--cold-scans", type=int, nargs="+", default=[10])
+    ap.add_argument("--cold-repeat", type=int, default=3)
+    args = ap.parse_args()
+    if args.only in (None, "warm"):
+        warm(args)
+    if args.only in (None, "cold"):
+        cold(args)
+
+
+if __name__ == "__main__":
+    main()
