@@ -37,3 +37,21 @@ def test_semslam_error_is_one_line_and_exit_1(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("semslam: error:") and "missing.pcd" in lines[0]
     assert "Traceback" not in proc.stderr
+
+
+def test_the_cli_mode_choices_are_the_filter_modes():
+    """cmd_slam spells the modes out (importing semslam.slam to build the parser cost 0.4 s per command)."""
+    from semslam.cli.cmd_slam import MODE_CHOICES
+    from semslam.slam import MODES
+
+    assert MODE_CHOICES == (*MODES, "all")
+
+
+def test_building_the_parser_does_not_import_the_slam_package():
+    """Every command builds the whole parser: it must not pay for numba kernels it does not run."""
+    import subprocess
+    import sys
+
+    code = "import sys; from semslam.cli.main import build_parser; build_parser(); print('semslam.slam' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.strip() == "False", out.stderr[-2000:]

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..slam.config import MODES
 
-MODE_CHOICES = (*MODES, "all")
+#: the filter modes (semslam.slam.MODES, spelled out: importing semslam.slam to build the parser costs 0.4 s on
+#: every command; tests/test_cli_main.py checks they agree) and "all"
+MODE_CHOICES = ("dr", "position", "pose", "pose+heading", "all")
 BACKEND_CHOICES = ("ekf", "isam2", "batch")
 
 
