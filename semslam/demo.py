@@ -61,6 +61,9 @@ class DemoConfig:
         Pass detections whose alignment was flagged unreliable to the filter (default False: skipped).
     descriptor, classifier : str
         The pipeline's matcher (see :class:`semslam.pipeline.PipelineConfig`).
+    models_dir : str, optional
+        A folder of the user's CAD models (``models.toml`` and meshes, see ``semslam db build --models``): the
+        database is built from them and they are the objects of the mission, instead of the built-in fittings.
     """
 
     seed: int = 0
@@ -71,6 +74,7 @@ class DemoConfig:
     descriptor: str = "esf+vfh"
     classifier: str = "chi2"
     extras: dict = field(default_factory=dict)
+    models_dir: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
@@ -120,17 +124,31 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
 
     cfg = DemoConfig() if config is None else config
     final = Path(out_dir)
+    objects = None
+    if cfg.models_dir is not None:  # read (and checked) before anything is written
+        from .simulation.cad_models import read_models
+
+        objects = read_models(cfg.models_dir)
     # built beside the target and swapped in at the end: a killed demo leaves the previous run intact, and only a
     # directory semslam wrote is ever replaced (semslam._outdir)
     with staged_output_dir(final, overwrite=overwrite, kind="demo") as out:
         stages = _Stages(log)
         t_start = time.perf_counter()
 
-        # 1. the built-in database and its leave-one-out evaluation (the papers' Tables 1 and 2)
-        views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
-                                    seed=cfg.seed, config=SURVEY_KINECT)
-        model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
-                                    seed=cfg.seed, config=POSE_MODEL_KINECT)
+        # 1. the database (built-in, or from the user's models) and its leave-one-out evaluation (Tables 1 and 2)
+        if objects is None:
+            views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
+                                        seed=cfg.seed, config=SURVEY_KINECT)
+            model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
+                                        seed=cfg.seed, config=POSE_MODEL_KINECT)
+        else:
+            from .simulation.cad_models import models_view_clouds
+
+            views, classes = stages.run("acquire database views of your models (Kinect-like, survey geometry)",
+                                        models_view_clouds, objects, seed=cfg.seed, config=SURVEY_KINECT)
+            model_views, _ = stages.run("acquire pose-model views of your models (Kinect-like, 60 deg, 0.7 m)",
+                                        models_view_clouds, objects, seed=cfg.seed, config=POSE_MODEL_KINECT,
+                                        tied_rests=True)
         db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
                         model_views=model_views, progress=progress)
         save_database(db, out / "db.npz")
@@ -146,7 +164,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
 
         # 2. the mission
         sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
-        mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress)
+        mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress,
+                             objects=objects)
         stages.run("write mission", write_mission, mission, out / "mission")
         # from here on the demo works on the mission as written (float32 scans), exactly what `semslam detect` and
         # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
@@ -156,7 +175,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         rec_out = stages.run("recognise objects in every scan", _recognize_mission, mission, db, cfg, out, progress)
 
         # 4. SLAM in every mode on the same detections
-        slam_results = stages.run("SLAM in every mode", _run_slam_modes, mission, rec_out["detections_by_scan"], cfg, out)
+        slam_results = stages.run("SLAM in every mode", _run_slam_modes, mission, rec_out["detections_by_scan"], cfg, out,
+                                  None if objects is None else {k: m.symmetry for k, m in objects.items()})
 
         # 5. consensus figure data, metrics, report
         _write_consensus(out, mission, rec_out["detections_by_scan"], slam_results.get("pose"))
@@ -231,13 +251,13 @@ def _write_fig3_data(path: Path, scan_id: int, cloud, result) -> None:
                  labels=labels, T_scanner_object=poses)
 
 
-def _run_slam_modes(mission, detections_by_scan: dict, cfg: DemoConfig, out: Path) -> dict:
+def _run_slam_modes(mission, detections_by_scan: dict, cfg: DemoConfig, out: Path, symmetries: dict | None = None) -> dict:
     from .simulation.truth_slam import builtin_symmetries
     from .slam import run_slam, write_run
     from .slam.rundir import mode_dir
 
     results = {}
-    symmetries = builtin_symmetries()
+    symmetries = builtin_symmetries() if symmetries is None else symmetries
     for mode in cfg.modes:
         res = run_slam(mission, detections_by_scan, mode=mode, seed=cfg.seed, symmetries=symmetries)
         write_run(res, mode_dir(out, mode))

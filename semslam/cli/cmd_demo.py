@@ -16,6 +16,9 @@ def register(sub, common) -> None:
     p.add_argument("--loops", type=int, default=None, help="loops of the mission (default 3, 2 with --quick)")
     p.add_argument("--overwrite", action="store_true", help="replace the run directory if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--models", default=None, metavar="DIR",
+                   help="your CAD models (models.toml + STL/OBJ/PLY, as for 'db build --models'): the database and the "
+                        "mission's objects are yours instead of the built-in fittings")
     p.set_defaults(func=run)
 
 
@@ -25,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from ..demo import DemoConfig, run_demo
     from ._output import emit
 
-    cfg = DemoConfig(seed=args.seed, quick=args.quick, loops=args.loops)
+    cfg = DemoConfig(seed=args.seed, quick=args.quick, loops=args.loops, models_dir=args.models)
     quiet = getattr(args, "json", False)
     log = (lambda s: None) if quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     metrics = run_demo(args.out, cfg, progress=not (args.no_progress or quiet), log=log, overwrite=args.overwrite)

@@ -20,7 +20,7 @@ from ..geometry import RigidTransform
 from ._ray_kernels import RayCaster
 from .config import SimulatorConfig
 from ..dataset import FORMAT_VERSION, Dataset, ScanRecord, VehicleTruth, vehicle_from_simulator_dict
-from .objects import builtin_objects
+from .objects import ObjectModel, builtin_objects
 from .scanner import LaserScanner
 from .sensors import sensor_stamps, simulate_ahrs, simulate_depth, simulate_dvl
 from .trajectory import Trajectory
@@ -54,7 +54,8 @@ def mission_trajectory(world: World, config: SimulatorConfig, rng: np.random.Gen
 
 
 def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
-                     scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False) -> Dataset:
+                     scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False,
+                     objects: dict | None = None) -> Dataset:
     """Simulate a whole mission.
 
     Parameters
@@ -67,6 +68,9 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
         False skips the laser (navigation and truth only: fast, for Monte-Carlo filter studies).
     scan_interval_s : float
         Time between scan starts (>= the scan duration 1 / scan_rate_hz).
+    objects : dict of str to ObjectModel, optional
+        The objects placed in the tank (default: the four built-in fittings), e.g. a user's CAD models from
+        :func:`semslam.simulation.cad_models.read_models`; the first four go to the corners of the route.
 
     Returns
     -------
@@ -80,7 +84,12 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     seed = _check_seed(seed)
     scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_mission")
     rngs = _streams(seed)
-    world = build_world(config.world, builtin_objects(), seed=rngs["world"])
+    if objects is None:
+        objects = builtin_objects()
+    elif not isinstance(objects, dict) or not objects or not all(isinstance(m, ObjectModel) for m in objects.values()):
+        raise SimulationError("The 'objects' argument of simulate_mission must be a non-empty dict of ObjectModel. "
+                              f"Got {type(objects).__name__} {objects!r:.80} instead.")
+    world = build_world(config.world, objects, seed=rngs["world"])
     traj = mission_trajectory(world, config, rngs["trajectory"])
     dvl = simulate_dvl(traj, config.world, config.dvl, rngs["dvl"])
     ahrs = simulate_ahrs(traj, config.ahrs, rngs["ahrs"])
