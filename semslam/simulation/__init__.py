@@ -1,6 +1,7 @@
 """semslam.simulation: the simulator (object meshes, Kinect view database, CIRS-like tank, laser
 scanner, vehicle motion, navigation sensors) and the mission types and directory format."""
 
+from .catalogue import CATALOGUE_LABELS, catalogue_objects
 from .config import (
                      AhrsConfig,
                      DepthConfig,
@@ -22,6 +23,7 @@ from .world import World, build_world, floor_depth_m
 
 __all__ = [
                      "BUILTIN_LABELS",
+                     "CATALOGUE_LABELS",
                      "MISSION_FORMAT_VERSION",
                      "AhrsConfig",
                      "AhrsLog",
@@ -48,6 +50,7 @@ __all__ = [
                      "build_world",
                      "builtin_objects",
                      "builtin_view_clouds",
+                     "catalogue_objects",
                      "floor_depth_m",
                      "kinect_view",
                      "load_object",
