@@ -96,3 +96,15 @@ def client():
         cluster.close()
         _, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=10)
         assert not alive, f"worker processes survived the cluster: {alive}"
+
+
+@pytest.fixture(scope="module")
+def builtin_db_fresh(tmp_path_factory):
+    """The built-in database built afresh (seed 0) in a private cache, not the user's ~/.cache copy."""
+    from semslam.simulation.builtin_db import builtin_database
+
+    os.environ["SEMSLAM_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    try:
+        return builtin_database(seed=0)
+    finally:
+        del os.environ["SEMSLAM_CACHE_DIR"]

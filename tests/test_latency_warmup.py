@@ -10,16 +10,8 @@ from semslam.pipeline import PipelineConfig, ScanRecognizer
 
 
 @pytest.fixture(scope="module")
-def db(tmp_path_factory):
-    import os
-
-    from semslam.simulation.builtin_db import builtin_database
-
-    os.environ["SEMSLAM_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
-    try:
-        return builtin_database(seed=0)
-    finally:
-        del os.environ["SEMSLAM_CACHE_DIR"]
+def db(builtin_db_fresh):
+    return builtin_db_fresh
 
 
 def test_warm_up_changes_no_result(db):

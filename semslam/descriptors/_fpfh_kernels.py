@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ._neighbors_kernels import _block, _bucket, cell_end, gather
-from ._pair_kernels import N_BINS, _add_pair, _bin, _fpfh_row, pair_features, pair_features_sym
+from ._pair_kernels import N_BINS, _add_pair_both, _bin, _fpfh_row, pair_features
 
 
 @njit(cache=True, nogil=True)
@@ -71,11 +71,7 @@ def streamed_fpfh(points, normals, valid, skip_invalid, origin, cell_m, radius_m
                 j = buf_i[u]
                 if j <= i or (skip_invalid and not valid[j]):
                     continue
-                _, f1, f2, f3, _, sym = pair_features_sym(points[i], normals[i], points[j], normals[j])
-                _add_pair(spfh, i, f1, f2, f3, incr[i])
-                if not sym:
-                    _, f1, f2, f3, _, sym = pair_features_sym(points[j], normals[j], points[i], normals[i])
-                _add_pair(spfh, j, f1, f2, f3, incr[j])
+                _add_pair_both(spfh, points, normals, i, j, incr)
         s0 = s1
     # pass 3: FPFH, the 1/d^2-weighted sum of the neighbours' SPFH (as fpfh_from_spfh)
     out = np.zeros((n, 3 * N_BINS))

@@ -146,12 +146,19 @@ def spfh_symmetric(points, normals, indptr, indices, valid, skip_invalid):  # pr
             j = indices[t]
             if j <= i or (skip_invalid and not valid[j]):
                 continue
-            _, f1, f2, f3, _, sym = pair_features_sym(points[i], normals[i], points[j], normals[j])
-            _add_pair(out, i, f1, f2, f3, incr[i])
-            if not sym:
-                _, f1, f2, f3, _, sym = pair_features_sym(points[j], normals[j], points[i], normals[i])
-            _add_pair(out, j, f1, f2, f3, incr[j])
+            _add_pair_both(out, points, normals, i, j, incr)
     return out
+
+
+@njit(cache=True, inline="always")
+def _add_pair_both(out, points, normals, i, j, incr):  # pragma: no cover - compiled
+    """Bin the pair (i, j) into both rows: its features computed once, unless the swap test ties (then each side
+    computes its own)."""
+    _, f1, f2, f3, _, sym = pair_features_sym(points[i], normals[i], points[j], normals[j])
+    _add_pair(out, i, f1, f2, f3, incr[i])
+    if not sym:
+        _, f1, f2, f3, _, sym = pair_features_sym(points[j], normals[j], points[i], normals[i])
+    _add_pair(out, j, f1, f2, f3, incr[j])
 
 
 @njit(cache=True)
