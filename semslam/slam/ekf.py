@@ -114,6 +114,11 @@ class SemanticEkf(CompressedState):
             N[lm.offset + 5] = 1.0
         self._N = N
 
+    @property
+    def heading_constrained(self) -> bool:
+        """Whether the observability constraint of :meth:`constrain_heading_nullspace` is on."""
+        return self._N is not None
+
     # ------------------------------------------------------------------ named state blocks
     def indices(self, block: str) -> np.ndarray:
         """Global state indices of a named block of the vehicle state: ``position`` (3, world NED, m),

@@ -231,7 +231,7 @@ class SlamSession:
                 continue
             self._history_before(t)
             self._predict_to(t)
-            if self.ekf._N is not None and (self._was_unaided or t - self._last_dvl_s > self.cfg.motion.unaided_after_s):
+            if self.ekf.heading_constrained and (self._was_unaided or t - self._last_dvl_s > self.cfg.motion.unaided_after_s):
                 self._was_unaided = True
                 # unaided, the velocity the null direction was propagated with may have been far off: re-anchor it
                 # on the current estimate (a rotation about the vehicle now; the launch prior is not a measurement)
