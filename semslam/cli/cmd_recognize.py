@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 
+from .cmd_segment import add_range_options, parse_length, range_fields
+
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     parser = subparsers.add_parser(
@@ -28,6 +30,20 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--seed", type=int, default=0, help="seed of RMSAC, ESF and the coarse alignment (default 0)")
     parser.add_argument("--no-pose", action="store_true", help="recognition only, no pose estimation")
     parser.add_argument("--out", metavar="FILE.jsonl", help="write one detection per line (JSON)")
+    seg = parser.add_argument_group(
+        "segmentation", "the defaults suit a laser at 1-3 m; for a depth camera frame (e.g. RealSense at 30 cm) "
+                        "use --max-range 0.5 --voxel auto --cluster-tolerance auto --max-planes 0")
+    seg.add_argument("--voxel", default=None, metavar="M|auto",
+                     help="voxel grid leaf in metres, 0 for none, 'auto': the scan's measured point spacing "
+                          "(default: the pipeline's, 0.005)")
+    seg.add_argument("--cluster-tolerance", default=None, metavar="M|auto",
+                     help="Euclidean cluster tolerance in metres, 'auto': 4 voxel leaves (default: 0.02)")
+    seg.add_argument("--max-planes", type=int, default=None, metavar="K",
+                     help="dominant planes removed before clustering (default: 1, the floor)")
+    add_range_options(seg)
+    parser.add_argument("--border", choices=("reject", "flag", "keep"), default=None,
+                        help="clusters at the edge of the scan's field of view: rejected as partial objects "
+                             "(default), recognised and flagged, or kept")
     parser.add_argument("--config", help="TOML or JSON file of PipelineConfig fields (a [pipeline] table, or the "
                                          "fields at the top); --descriptor/--classifier/--no-pose override it")
     parser.set_defaults(func=run)
@@ -61,6 +77,13 @@ def format_result(payload: dict) -> str:
     lines = [(f"{payload['scene']}: {payload['n_points']} points, {len(payload['clusters'])} clusters, "
               f"{len(payload['detections'])} detection(s) (db {payload['db']}, {payload['descriptor']}, "
               f"{payload['classifier']})")]
+    seg = payload.get("segmentation") or {}
+    r = seg.get("resolved") or {}
+    if r.get("spacing_m") is not None:
+        leaf = "none" if r["voxel_leaf_m"] is None else f"{1000 * r['voxel_leaf_m']:.2f} mm"
+        lines.append(f"segmentation: point spacing {1000 * r['spacing_m']:.2f} mm -> voxel {leaf}, cluster "
+                     f"tolerance {1000 * r['cluster_tolerance_m']:.2f} mm")
+    lines += [f"note: {n}" for n in seg.get("notes", [])]
     by_cluster = {c["cluster_index"]: c for c in payload["clusters"]}
     k = 0
     for c in payload["clusters"]:
@@ -76,6 +99,31 @@ def format_result(payload: dict) -> str:
     t = payload["timings_ms"]
     lines.append("timings (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
     return "\n".join(lines)
+
+
+def _segmentation_table(args: argparse.Namespace, table: object) -> object:
+    """The config file's segmentation table with the command-line options laid over it. Points exactly at the
+    sensor origin are left out unless --keep-origin-points or the file says ``drop_origin = false``."""
+    if not isinstance(table, dict):
+        return table  # PipelineConfig.from_dict names the problem
+    out = dict(table)
+    given = range_fields(args, "recognize")
+    if not args.keep_origin_points and "drop_origin" in out:
+        given.pop("drop_origin")
+    out.update(given)
+    if args.voxel is not None:
+        out["voxel_leaf_m"] = parse_length("--voxel", args.voxel, "recognize", auto=True, zero_disables=True)
+    if args.cluster_tolerance is not None:
+        out["cluster_tolerance_m"] = parse_length("--cluster-tolerance", args.cluster_tolerance, "recognize",
+                                                  auto=True)
+    if args.max_planes is not None:
+        if args.max_planes < 0:
+            from ..errors import InputError
+
+            raise InputError(f"The '--max-planes' option of semslam recognize must be >= 0. "
+                             f"Got {args.max_planes} instead.")
+        out["max_planes"] = args.max_planes
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -94,10 +142,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out and Path(args.out).is_dir():  # say so before the work, not after it
         raise InputError(f"The '--out' option must name a file to write. Got the directory {args.out!r} instead.")
-    t0 = time.perf_counter()
-    db = builtin_database(seed=0) if args.db == "builtin" else load_database(args.db)
-    t_db = (time.perf_counter() - t0) * 1e3
-    scan = read_point_cloud(args.scene)
     raw = {}
     if args.config:
         from ._inputs import read_config_file
@@ -110,13 +154,21 @@ def run(args: argparse.Namespace) -> int:
         raw["estimate_pose"] = False
     if args.descriptor is not None:
         raw["descriptor"] = args.descriptor
+    if args.border is not None:
+        raw["border"] = args.border
+    raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
     config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "the options")
+    t0 = time.perf_counter()
+    db = builtin_database(seed=0) if args.db == "builtin" else load_database(args.db)
+    t_db = (time.perf_counter() - t0) * 1e3
+    scan = read_point_cloud(args.scene)
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)
     timings = {"load_db": t_db, **result.timings_ms}
     payload = {"scene": str(args.scene), "db": str(args.db), "n_points": scan.n_points,
                "descriptor": config.descriptor, "classifier": config.classifier,
                "detections": [d.to_dict() for d in result.detections],
-               "clusters": [c.to_dict() for c in result.clusters], "timings_ms": timings}
+               "clusters": [c.to_dict() for c in result.clusters], "timings_ms": timings,
+               "segmentation": result.segmentation.to_dict()}
     if args.out:
         text = "".join(json.dumps(to_jsonable(d)) + "\n" for d in payload["detections"])
         atomic_write_text(args.out, text)

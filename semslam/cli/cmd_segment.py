@@ -20,10 +20,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("scene", metavar="SCENE", help="a .pcd, .ply or .npy file (metres)")
     parser.add_argument(
         "--voxel",
-        type=float,
-        default=0.005,
-        metavar="M",
-        help="voxel grid leaf size in metres, 0 to disable (default: 0.005)",
+        default="0.005",
+        metavar="M|auto",
+        help="voxel grid leaf size in metres, 0 to disable, 'auto': the measured point spacing (default: 0.005)",
     )
     parser.add_argument(
         "--distance-threshold",
@@ -48,11 +47,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     )
     parser.add_argument(
         "--cluster-tolerance",
-        type=float,
-        default=0.02,
-        metavar="M",
-        help="Euclidean cluster tolerance in metres (default: 0.02)",
+        default="0.02",
+        metavar="M|auto",
+        help="Euclidean cluster tolerance in metres, 'auto': 4 voxel leaves (default: 0.02)",
     )
+    add_range_options(parser)
     parser.add_argument(
         "--min-cluster-size",
         type=int,
@@ -81,6 +80,56 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.set_defaults(func=run)
 
 
+def add_range_options(parser: argparse.ArgumentParser) -> None:
+    """``--max-range``, ``--min-range`` and ``--keep-origin-points`` (shared with ``semslam recognize``)."""
+    parser.add_argument("--max-range", default=None, metavar="M",
+                        help="leave out points farther than M metres from the sensor (default: no limit; "
+                             "e.g. 0.5 for a depth camera 30 cm from the object)")
+    parser.add_argument("--min-range", default=None, metavar="M",
+                        help="leave out points nearer than M metres to the sensor (default: 0)")
+    parser.add_argument("--keep-origin-points", action="store_true",
+                        help="keep points exactly at the sensor origin (by default they are left out: a depth "
+                             "camera stores its invalid pixels there, and no real return lies there)")
+
+
+def parse_length(option: str, value: str | None, command: str, *, auto: bool = False,
+                 zero_disables: bool = False, check: bool = True) -> float | str | None:
+    """The value of a length option: a finite number > 0 (metres), ``"auto"`` when ``auto``, 0 -> None when
+    ``zero_disables``; anything else raises :class:`~semslam.errors.InputError` naming the option (with
+    ``check=False`` any number is passed on, for the config's own check to name its field)."""
+    from ..errors import InputError
+
+    if value is None:
+        return None
+    if auto and value == "auto":
+        return "auto"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = float("nan")
+    if zero_disables and v == 0:
+        return None
+    if not check and v == v:
+        return v
+    if not (v > 0 and v < float("inf")):
+        expected = "a finite length > 0 in metres" + (" (0 disables)" if zero_disables else "") + \
+            (" or 'auto'" if auto else "")
+        raise InputError(f"The '{option}' option of semslam {command} must be {expected}. Got {value!r} instead.")
+    return v
+
+
+def range_fields(args: argparse.Namespace, command: str) -> dict:
+    """SegmentationConfig fields of :func:`add_range_options` (only those given, plus ``drop_origin``)."""
+    out: dict = {"drop_origin": not args.keep_origin_points}
+    hi = parse_length("--max-range", args.max_range, command)
+    lo = parse_length("--min-range", args.min_range, command)
+    if hi is not None:
+        out["max_range_m"] = hi
+    if lo is not None:
+        out["min_range_m"] = lo
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
@@ -91,10 +140,8 @@ def run(args: argparse.Namespace) -> int:
     from ..segmentation import SegmentationConfig, segment_scene
     from ._output import emit, to_jsonable
 
-    if args.voxel < 0:
-        raise InputError(
-            f"The '--voxel' option of semslam segment must be >= 0 (0 disables). Got {args.voxel} instead."
-        )
+    voxel = parse_length("--voxel", args.voxel, "segment", auto=True, zero_disables=True)
+    tolerance = parse_length("--cluster-tolerance", args.cluster_tolerance, "segment", auto=True, check=False)
     if args.max_cluster_size < 0:
         raise InputError(
             "The '--max-cluster-size' option of semslam segment must be >= 0 (0: no limit). "
@@ -105,13 +152,14 @@ def run(args: argparse.Namespace) -> int:
             f"The '--seed' option of semslam segment must be >= 0. Got {args.seed} instead."
         )
     config = SegmentationConfig(
-        voxel_leaf_m=args.voxel or None,
+        voxel_leaf_m=voxel,
         distance_threshold_m=args.distance_threshold,
         max_planes=args.max_planes,
         min_plane_inliers=args.min_plane_inliers,
-        cluster_tolerance_m=args.cluster_tolerance,
+        cluster_tolerance_m=tolerance,
         min_cluster_size=args.min_cluster_size,
         max_cluster_size=args.max_cluster_size or None,
+        **range_fields(args, "segment"),
     )
     cloud = read_point_cloud(args.scene)
     result = segment_scene(cloud, config, seed=args.seed)
@@ -141,6 +189,11 @@ def _text(p: dict) -> str:
         f"{p['n_after_planes']} after plane removal"
     )
     lines = [head]
+    r = p.get("resolved") or {}
+    if r.get("spacing_m") is not None:
+        leaf = "none" if r["voxel_leaf_m"] is None else f"{1000 * r['voxel_leaf_m']:.2f} mm"
+        lines.append(f"auto: point spacing {1000 * r['spacing_m']:.2f} mm -> voxel {leaf}, cluster tolerance "
+                     f"{1000 * r['cluster_tolerance_m']:.2f} mm")
     for i, plane in enumerate(p["planes"]):
         a, b, c, d = plane["coefficients"]
         lines.append(

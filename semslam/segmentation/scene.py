@@ -15,6 +15,7 @@ from ..errors import InputError, SegmentationError
 from . import _voxel_kernels
 from .clusters import _clusters
 from .plane import PlaneModel, _remove_planes
+from .prefilter import check_length_or_auto, resolve_lengths, valid_return_mask
 from .voxel import _voxel_grid
 
 __all__ = ["SegmentationConfig", "SegmentationResult", "segment_scene"]
@@ -36,23 +37,45 @@ class SegmentationConfig:
       structure, not fittings.
     * ``max_planes = 1``: the floor; raise it to also remove tank walls. A further plane is removed
       only if it holds at least ``min_plane_inliers`` points (default 5 % of the cloud).
+
+    Before the voxel grid (:mod:`.prefilter`): ``drop_origin = True`` leaves out the points exactly at the
+    sensor origin (a depth camera's invalid pixels; never a real return; off by default so that synthetic
+    clouds through the origin stay whole; the CLI turns it on), ``min_range_m`` / ``max_range_m``
+    keep the sensor's working range (default: everything). ``voxel_leaf_m`` and ``cluster_tolerance_m`` may
+    be ``"auto"``: measured from the kept points' spacing ``s`` (leaf ``s``, tolerance 4 leaves), for
+    sensors other than the laser, e.g. a RealSense frame at 30 cm (``s`` ~ 1.7 mm).
     """
 
-    voxel_leaf_m: float | None = 0.005
+    voxel_leaf_m: float | str | None = 0.005
     distance_threshold_m: float = 0.01
     max_planes: int = 1
     min_plane_inliers: int | None = None
     plane_confidence: float = 0.99
     plane_max_iterations: int = 1000
     plane_n_pretest: int = 1
-    cluster_tolerance_m: float = 0.02
+    cluster_tolerance_m: float | str = 0.02
     min_cluster_size: int = 50
     max_cluster_size: int | None = 25000
+    drop_origin: bool = False
+    min_range_m: float = 0.0
+    max_range_m: float | None = None
 
     def __post_init__(self) -> None:
         c = "SegmentationConfig"
-        if self.voxel_leaf_m is not None:
-            check_positive("voxel_leaf_m", self.voxel_leaf_m, caller=c)
+        for name, value in (("voxel_leaf_m", self.voxel_leaf_m), ("cluster_tolerance_m", self.cluster_tolerance_m)):
+            if isinstance(value, str):  # only "auto"
+                check_length_or_auto(name, value, caller=c)
+            elif value is not None or name == "cluster_tolerance_m":
+                check_positive(name, value, caller=c)
+        if not isinstance(self.drop_origin, bool):
+            raise InputError(f"The 'drop_origin' argument of {c} must be True or False. "
+                             f"Got {self.drop_origin!r} instead.")
+        lo_r = check_positive("min_range_m", self.min_range_m, caller=c, allow_zero=True)
+        if self.max_range_m is not None:
+            hi_r = check_positive("max_range_m", self.max_range_m, caller=c)
+            if hi_r <= lo_r:
+                raise InputError(f"The 'max_range_m' argument of {c} must be > min_range_m={lo_r}. "
+                                 f"Got {self.max_range_m!r} instead.")
         check_positive("distance_threshold_m", self.distance_threshold_m, caller=c)
         check_int("max_planes", self.max_planes, caller=c, minimum=0)
         if self.min_plane_inliers is not None:
@@ -65,7 +88,6 @@ class SegmentationConfig:
             )
         check_int("plane_max_iterations", self.plane_max_iterations, caller=c, minimum=1)
         check_int("plane_n_pretest", self.plane_n_pretest, caller=c, minimum=0)
-        check_positive("cluster_tolerance_m", self.cluster_tolerance_m, caller=c)
         lo = check_int("min_cluster_size", self.min_cluster_size, caller=c, minimum=1)
         if self.max_cluster_size is not None:
             hi = check_int("max_cluster_size", self.max_cluster_size, caller=c, minimum=1)
@@ -95,15 +117,22 @@ class SegmentationResult:
         Sorted indices into ``segmented_cloud``, one array per cluster, largest first.
     clusters : list of PointCloud
         ``segmented_cloud.select(indices)`` for each cluster.
-    point_voxel : ndarray of shape (N_input,) or None
-        Row of ``segmented_cloud`` each input point was averaged into (None without voxel grid).
+    point_voxel : ndarray of shape (N_kept,) or None
+        Row of ``segmented_cloud`` each kept input point was averaged into (None without voxel grid).
     n_input_points : int
     n_after_planes : int
         Points of ``segmented_cloud`` left for clustering.
     timings_ms : dict of str to float
-        Wall time of each stage (``voxel``, ``planes``, ``clusters``, ``total``), milliseconds.
+        Wall time of each stage (``voxel``, with the prefilter and the spacing of ``"auto"``; ``planes``,
+        ``clusters``, ``total``), milliseconds.
     notes : list of str
         Why a stage removed nothing or the result is empty (never silent).
+    kept_indices : ndarray of int64 or None
+        Indices into the input of the points segmented (the valid returns within the working range, see
+        :mod:`.prefilter`); None when every input point was kept. ``point_voxel`` is indexed like them.
+    resolved : dict
+        The lengths used: ``voxel_leaf_m`` (None: no grid), ``cluster_tolerance_m``, and the measured
+        ``spacing_m`` when an ``"auto"`` length needed it (else None).
     """
 
     segmented_cloud: PointCloud
@@ -117,6 +146,8 @@ class SegmentationResult:
     notes: list[str] = field(default_factory=list)
     # (packed point-by-voxel order, voxel run starts) from the voxel grid, for input_indices
     _voxel_points: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    kept_indices: np.ndarray | None = field(default=None, repr=False)
+    resolved: dict = field(default_factory=dict)
 
     @property
     def cluster_sizes(self) -> list[int]:
@@ -130,8 +161,11 @@ class SegmentationResult:
     def input_indices(self, cluster: int) -> np.ndarray:
         """Sorted indices into the INPUT cloud of the points of cluster ``cluster`` (through the voxel map)."""
         idx = self.cluster_indices[cluster]
-        if self.point_voxel is None:
-            return idx
+        if self.point_voxel is not None:
+            idx = self._kept_input_indices(idx)
+        return idx if self.kept_indices is None else self.kept_indices[idx]
+
+    def _kept_input_indices(self, idx: np.ndarray) -> np.ndarray:
         if self._voxel_points is not None and 16 * len(idx) < len(self.point_voxel):
             packed, start = self._voxel_points  # small cluster: gather its points, sort them
             if 16 * int((start[idx + 1] - start[idx]).sum()) < len(self.point_voxel):
@@ -141,6 +175,8 @@ class SegmentationResult:
     def to_dict(self) -> dict:
         return {
             "n_input_points": self.n_input_points,
+            "n_kept_points": self.n_input_points if self.kept_indices is None else len(self.kept_indices),
+            "resolved": dict(self.resolved),
             "n_segmented_points": self.segmented_cloud.n_points,
             "n_after_planes": self.n_after_planes,
             "planes": [p.to_dict() for p in self.planes],
@@ -185,15 +221,28 @@ def segment_scene(
         )
     notes: list[str] = []
     timings: dict[str, float] = {}
+    n_input = cloud.n_points
     t_start = t0 = time.perf_counter()
+
+    kept = valid_return_mask(cloud.points_xyz_m, cloud.viewpoint_xyz_m, drop_origin=cfg.drop_origin,
+                             min_range_m=float(cfg.min_range_m), max_range_m=cfg.max_range_m)
+    kept_indices = None
+    if kept is not None:
+        kept_indices = np.flatnonzero(kept)
+        notes.append(f"{cloud.n_points - len(kept_indices)} point(s) left out: "
+                     + _dropped_text(cloud, kept, cfg))
+        cloud = cloud.select(kept_indices)
+    leaf, tolerance, spacing = resolve_lengths(cloud.points_xyz_m, cfg.voxel_leaf_m, cfg.cluster_tolerance_m,
+                                               seed=0)
+    resolved = {"voxel_leaf_m": leaf, "cluster_tolerance_m": tolerance, "spacing_m": spacing}
 
     point_voxel = None
     voxel_points = None
     seg_cloud = cloud
-    if cfg.voxel_leaf_m is not None and cloud.n_points:
+    if leaf is not None and cloud.n_points:
         # the cloud was validated on construction: skip the public functions' re-validation
         grid, intensity, voxel_points = _voxel_grid(
-            cloud.points_xyz_m, float(cfg.voxel_leaf_m), False, cloud.intensity
+            cloud.points_xyz_m, float(leaf), False, cloud.intensity
         )
         point_voxel = grid.point_voxel
         # fresh arrays owned by this result: read-only up front so PointCloud does not copy them
@@ -256,7 +305,7 @@ def segment_scene(
     elif len(remaining):
         local = _clusters(
             pts if len(remaining) == len(pts) else pts[remaining],
-            float(cfg.cluster_tolerance_m),
+            float(tolerance),
             cfg.min_cluster_size,
             cfg.max_cluster_size,
         )
@@ -275,12 +324,28 @@ def segment_scene(
         cluster_indices,
         clusters,
         point_voxel,
-        cloud.n_points,
+        n_input,
         len(remaining),
         timings,
         notes,
         voxel_points,
+        kept_indices,
+        resolved,
     )
+
+
+def _dropped_text(cloud: PointCloud, kept: np.ndarray, cfg: SegmentationConfig) -> str:
+    """How many of the left-out points were at the sensor origin and how many out of the working range."""
+    parts = []
+    if cfg.drop_origin:
+        n0 = int((cloud.points_xyz_m == np.asarray(cloud.viewpoint_xyz_m)[None, :]).all(axis=1).sum())
+        if n0:
+            parts.append(f"{n0} at the sensor origin (invalid returns)")
+    n_range = int((~kept).sum()) - (n0 if cfg.drop_origin else 0)
+    if n_range:
+        hi = "inf" if cfg.max_range_m is None else f"{cfg.max_range_m:g}"
+        parts.append(f"{n_range} outside the working range [{cfg.min_range_m:g}, {hi}] m")
+    return ", ".join(parts)
 
 
 #: Points farther than this many robust extents outside the 1-99 % box are left out of the plane fit.
