@@ -40,3 +40,17 @@ def read_config_file(path: str, option: str = "--config") -> dict:
     from .._tables import read_table
 
     return read_table(path, f"{option} file", ConfigError)
+
+
+def parse_direction(text: str) -> tuple[float, float, float]:
+    """``X,Y,Z`` as a non-zero finite 3-vector (argparse type: bad text is a usage error naming it)."""
+    import argparse
+    import math
+
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values) or not any(values):
+        raise argparse.ArgumentTypeError(f"expected a non-zero direction X,Y,Z (three finite numbers), got {text!r}")
+    return values  # type: ignore[return-value]

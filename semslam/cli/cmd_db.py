@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._inputs import parse_direction
+
 
 def _length_or_auto(value: str):
     """A length in metres, or 'auto' (from the views' measured point spacing)."""
@@ -42,6 +44,15 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     src.add_argument("--models", metavar="MODELS_DIR",
                      help="your CAD models (STL, OBJ, PLY + models.toml: file, unit, symmetry, T_mesh_object per "
                           "class) acquired by the simulated Kinect-like camera")
+    build.add_argument("--fuse", action="store_true",
+                       help="VIEWS_DIR views are in their own sensor frames: align each class's views into one "
+                            "object frame (CLASS/poses.csv with T_object_sensor per view if present, else "
+                            "estimated) and store the fused model")
+    build.add_argument("--up", type=parse_direction, default=None, metavar="X,Y,Z",
+                       help="with --fuse: the up direction in the views' sensor frames (0,-1,0 for a level "
+                            "camera, y down): gravity-aligned alignment and refinement")
+    build.add_argument("--no-clean", dest="clean", action="store_false",
+                       help="keep points at the sensor origin and drawn lines in VIEWS_DIR views (default: dropped)")
     build.add_argument("--out", required=True, metavar="DB", help="database file to write (.npz)")
     build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin/--models (default 8)")
     build.add_argument("--kinect-elevation", type=float, default=75.0, metavar="DEG",
@@ -88,6 +99,7 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 def run_build(args: argparse.Namespace) -> int:
     import time
 
+    from ..errors import InputError
     from ..recognition import build_database, build_database_from_folder, save_database
     from ._output import emit
 
@@ -102,6 +114,8 @@ def run_build(args: argparse.Namespace) -> int:
         from ..experiments._dask import check_jobs
 
         kwargs["mapper"] = partial(_dask_mapper, jobs=check_jobs(args.jobs), scheduler=args.scheduler)
+    if (args.builtin or args.models is not None) and (args.fuse or args.up is not None):
+        raise InputError("--fuse and --up are for a VIEWS_DIR of recorded views, not --builtin or --models.")
     if args.builtin:
         import math
 
@@ -122,8 +136,17 @@ def run_build(args: argparse.Namespace) -> int:
     elif args.models is not None:
         db, warned = _build_from_models(args, kwargs)
         source = str(args.models)
+    elif args.fuse:
+        from ..pipeline.fuse import build_fused_database
+
+        if kwargs.pop("mapper", None) is not None:
+            raise InputError("--fuse computes the descriptors in this process: drop --jobs/--scheduler.")
+        db = build_fused_database(args.views_dir, up_sensor=args.up, clean=args.clean, **kwargs)
+        source = str(args.views_dir)
     else:
-        db = build_database_from_folder(args.views_dir, **kwargs)
+        if args.up is not None:
+            raise InputError("--up is for --fuse (views in their own sensor frames); add --fuse or drop --up.")
+        db = build_database_from_folder(args.views_dir, clean=args.clean, **kwargs)
         source = str(args.views_dir)
     path = save_database(db, args.out)
     payload = {"path": str(path), "source": source, "seconds": round(time.perf_counter() - t0, 3), **db.summary()}

@@ -2,7 +2,14 @@
 
 Prints ``T_target_source`` (maps SOURCE points into the TARGET frame), the fitness (inlier fraction),
 the inlier RMSE and the stage timings; ``--json`` prints the whole result. ``--out FILE`` also writes the
-source cloud moved into the target frame (atomically). Exit 1 when the coarse alignment finds no
+source cloud moved into the target frame (atomically).
+
+``--up X,Y,Z`` (the up direction in SOURCE's frame; ``--up-target`` in TARGET's, default the same) switches
+to gravity-aligned registration (:func:`semslam.registration.align_upright`): a yaw scan about up, 4-DoF
+point-to-plane refinement, hypotheses that would show the target sensor the object's back dropped, and a
+verdict: ``reliable``, or ``ambiguous`` (a distinct yaw fits nearly as well; the yaw sigma then covers it).
+``--clean`` first drops points at the sensor origin (invalid depth) and drawn lines (axes/normals saved
+by a viewer; :func:`semslam.segmentation.clean.clean_view`). Exit 1 when the coarse alignment finds no
 hypothesis with the required inlier fraction, or (one line on stderr) when a cloud is a plane or a line,
 or the time budget runs out before the RANSAC.
 
@@ -14,6 +21,8 @@ source voxels, 4x as many target voxels); far outliers are cropped; ``--remove-o
 from __future__ import annotations
 
 import argparse
+
+from ._inputs import parse_direction
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -48,6 +57,13 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     p.add_argument("--icp-max-iterations", type=int, default=50, help="ICP iterations (default 50)")
     p.add_argument("--icp-max-points", type=int, default=20000, metavar="N",
                    help="ICP on a seeded random subset of at most N source points (default 20000; 0 = all, as PCL)")
+    p.add_argument("--up", type=parse_direction, default=None, metavar="X,Y,Z",
+                   help="up direction in the SOURCE frame (e.g. 0,-1,0 for a level camera, y down): "
+                        "gravity-aligned 4-DoF registration that resolves upside-down flips")
+    p.add_argument("--up-target", type=parse_direction, default=None, metavar="X,Y,Z",
+                   help="up direction in the TARGET frame (default: the same as --up)")
+    p.add_argument("--clean", action="store_true",
+                   help="drop points at the sensor origin (invalid depth) and drawn straight lines first")
     p.add_argument("--out", default=None, metavar="FILE", help="write the aligned source cloud here")
     p.set_defaults(func=run)
 
@@ -97,6 +113,15 @@ def run(args: argparse.Namespace) -> int:
                          max_neighbors=args.max_neighbors or None, icp_max_points=args.icp_max_points or None)
     source = read_point_cloud(args.source)
     target = read_point_cloud(args.target)
+    if args.clean:
+        from ..segmentation.clean import clean_view
+
+        source = clean_view(source, name=f"SOURCE {args.source}")[0]
+        target = clean_view(target, name=f"TARGET {args.target}")[0]
+    if args.up_target is not None and args.up is None:
+        raise RegistrationError("--up-target needs --up (the up direction in the SOURCE frame).")
+    if args.up is not None:
+        return _run_upright(args, source, target)
     if budget is not None:  # start-up and reading the files count against the budget
         from dataclasses import replace
 
@@ -129,3 +154,38 @@ def run(args: argparse.Namespace) -> int:
 
     emit(args, payload, text)
     return 0 if res.converged else 1
+
+
+def _run_upright(args: argparse.Namespace, source, target) -> int:
+    import numpy as np
+
+    from ..errors import RegistrationError
+    from ..io import write_point_cloud
+    from ..registration import align_upright
+    from ._output import emit
+
+    try:
+        res = align_upright(source, target, up_source=args.up, up_target=args.up_target or args.up)
+    except RegistrationError as exc:
+        raise RegistrationError(f"Cannot register SOURCE {args.source} onto TARGET {args.target}: {exc}") from None
+    if args.out:
+        write_point_cloud(args.out, source.transformed(res.T_target_source, frame_id=target.frame_id))
+    payload = {"source": args.source, "target": args.target, "up_source": list(args.up),
+               "up_target": list(args.up_target or args.up), **res.to_dict()}
+
+    def text() -> str:
+        T, ex = res.T_target_source, res.extras
+        rows = "\n".join("  " + " ".join(f"{v:+.6f}" for v in row) for row in T.matrix)
+        xyz, rpy = T.translation_m, np.degrees(T.as_rpy())
+        verdict = "reliable" if ex["reliable"] else ("AMBIGUOUS: another yaw fits nearly as well" if ex["ambiguous"]
+                                                     else f"NOT reliable: fitness below {0.5:g}")
+        alts = ", ".join(f"{h['yaw_deg']:+.1f} deg (rms {1e3 * h['rms_m']:.2f} mm)" for h in ex["hypotheses"])
+        times = ", ".join(f"{k} {v:.0f} ms" for k, v in res.timings_ms.items())
+        return (f"T_target_source (upright, {verdict}):\n{rows}\n"
+                f"xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]\n"
+                f"yaw about up sigma {ex['yaw_sigma_deg']:.2f} deg; hypotheses (yaw about the target's up): {alts}\n"
+                f"fitness {res.fitness:.4f} (inliers within {res.max_correspondence_m:.4g} m), "
+                f"inlier RMSE {1e3 * res.inlier_rmse_m:.3f} mm\ntimings: {times}")
+
+    emit(args, payload, text)
+    return 0

@@ -238,6 +238,17 @@ class ViewDatabase:
         i = self._check_index(i)
         return PointCloud(self.view_points(i), viewpoint_xyz_m=self.viewpoints_xyz_m[i], frame_id="object")
 
+    def view_directions(self) -> np.ndarray:
+        """Unit viewing direction of every view (V, 3), object frame: from the view's centroid to its sensor
+        origin; NaN where they coincide. Views recorded in their own sensor frames (not fused into one
+        object frame) all point the same way, which the rejection's calibration reads as one viewpoint."""
+        sums = np.add.reduceat(self.points_xyz_m.astype(np.float64), self.point_offsets[:-1], axis=0)
+        centroids = sums / np.diff(self.point_offsets)[:, None]
+        d = self.viewpoints_xyz_m - centroids
+        n = np.linalg.norm(d, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n > 1e-12, d / n, np.nan)
+
     def pose_views(self, label: str) -> list[PointCloud]:
         """The views pose estimation fuses for class ``label``, object frame, with their viewpoints.
 
@@ -692,15 +703,26 @@ def _class_infos(classes: Mapping[str, Any], caller: str, allow_empty: bool = Fa
     return out
 
 
-def build_database_from_folder(views_dir: str | Path, **kwargs: Any) -> ViewDatabase:
+def build_database_from_folder(views_dir: str | Path, *, clean: bool = True, **kwargs: Any) -> ViewDatabase:
     """Build a database from a folder ``views_dir/CLASS/VIEW.{pcd,ply,npy}`` of views in the object frame.
 
     An optional ``views_dir/classes.json`` maps labels to ``{"symmetry": {...Symmetry.to_dict()},
     "size_xyz_m": [x, y, z]}``; a class it does not describe gets symmetry ``none`` and the bounding box
     of all its views' points as size. Each file's ``VIEWPOINT`` is the view's sensor origin. Views are
-    taken in sorted order. Keyword arguments go to :func:`build_database`.
+    taken in sorted order. ``clean`` (default) drops points at the sensor origin (invalid depth) and drawn
+    lines (:func:`semslam.segmentation.clean.clean_view`). Keyword arguments go to :func:`build_database`.
+    Views recorded in their own sensor frames are fused into one object frame by
+    :func:`semslam.pipeline.fuse.build_fused_database` (``semslam db build --fuse``).
     """
+    views, declared, meta_path = read_view_folder(views_dir, clean=clean)
+    return build_database(views, folder_classes(views, declared, meta_path), **kwargs)
+
+
+def read_view_folder(views_dir: str | Path, *, clean: bool = True) -> tuple[list, dict, Path]:
+    """The views ``[(label, view_id, PointCloud)]`` of a folder ``CLASS/VIEW.{pcd,ply,npy}`` in sorted order,
+    the content of its optional ``classes.json`` and that file's path (see :func:`build_database_from_folder`)."""
     from ..io import read_point_cloud
+    from ..segmentation.clean import clean_view
 
     root = Path(views_dir)
     if not root.is_dir():
@@ -719,9 +741,20 @@ def build_database_from_folder(views_dir: str | Path, **kwargs: Any) -> ViewData
         for f in sorted(class_dir.iterdir()):
             if f.suffix.lower() in POINT_FILE_SUFFIXES:
                 cloud = read_point_cloud(f, frame_id="object")
+                if clean:
+                    try:
+                        cloud = clean_view(cloud, name=repr(str(f)))[0]
+                    except InputError as exc:
+                        raise DatabaseError(str(exc)) from None
                 views.append((class_dir.name, f.stem, cloud))
     if not views:
         raise DatabaseError(f"The views folder {str(root)!r} holds no CLASS/VIEW{{{','.join(POINT_FILE_SUFFIXES)}}} files.")
+    return views, declared, meta_path
+
+
+def folder_classes(views: Sequence[tuple[str, str, PointCloud]], declared: Mapping[str, Any],
+                   meta_path: Path) -> dict[str, Any]:
+    """Class infos of a view folder: ``classes.json``'s entries, else symmetry none and the views' bounding box."""
     classes: dict[str, Any] = {}
     for label in sorted({v[0] for v in views}):
         if label in declared:
@@ -733,7 +766,7 @@ def build_database_from_folder(views_dir: str | Path, **kwargs: Any) -> ViewData
                 raise DatabaseError(f"The entry {label!r} of {str(meta_path)!r} is invalid: {exc}") from None
         else:
             classes[label] = {"symmetry": Symmetry(), "size_xyz_m": _bbox_size(views, label)}
-    return build_database(views, classes, **kwargs)
+    return classes
 
 
 def _bbox_size(views: Sequence[tuple[str, str, PointCloud]], label: str) -> np.ndarray:

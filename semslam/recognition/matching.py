@@ -154,8 +154,11 @@ class Chi2NearestNeighbor(_Estimator):
         self.reject_margin = reject_margin
         self.algorithm = algorithm
 
-    def fit(self, X: Any, y: Any) -> Chi2NearestNeighbor:
-        """Store the histograms ``X`` (n_views, n_bins) with their labels ``y`` (n_views,)."""
+    def fit(self, X: Any, y: Any, view_directions: Any = None) -> Chi2NearestNeighbor:
+        """Store the histograms ``X`` (n_views, n_bins) with their labels ``y`` (n_views,).
+
+        ``view_directions`` (n_views, 3), optional: the views' viewing directions in the object frame, so
+        that the rejection is calibrated leaving one viewpoint out (:func:`calibrate_rejection`)."""
         caller = "Chi2NearestNeighbor.fit"
         check_int("n_neighbors", self.n_neighbors, caller=caller, minimum=1)
         check_choice("rejection", self.rejection, ("none", "global", "per_class"), caller=caller)
@@ -170,7 +173,7 @@ class Chi2NearestNeighbor(_Estimator):
         if self.rejection != "none":
             self.rejection_ = calibrate_rejection(
                 self.X_fit_, self.y_fit_, quantile=self.reject_quantile, margin=self.reject_margin,
-                mode=self.rejection)
+                mode=self.rejection, view_directions=view_directions)
         return self
 
     def _check_fitted(self, caller: str) -> None:

@@ -74,7 +74,8 @@ class Recognizer:
         self.db = db
         self.descriptor = check_choice("descriptor", descriptor, DESCRIPTORS, caller="Recognizer")
         self.classifier = Chi2NearestNeighbor(rejection=rejection, reject_quantile=reject_quantile,
-                                              reject_margin=reject_margin).fit(db.features(descriptor), db.labels)
+                                              reject_margin=reject_margin).fit(db.features(descriptor), db.labels,
+                                                                               view_directions=db.view_directions())
 
     @property
     def thresholds(self):

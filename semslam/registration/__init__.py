@@ -9,14 +9,17 @@ from .coarse import align_prerejective
 from .icp import ICP_METHODS, IcpTarget, align_icp, prepare_icp_target
 from .pipeline import RegisterConfig, register
 from .result import RegistrationResult
+from .upright import UprightConfig, align_upright
 
 __all__ = [
     "ICP_METHODS",
     "IcpTarget",
     "RegisterConfig",
     "RegistrationResult",
+    "UprightConfig",
     "align_icp",
     "align_prerejective",
+    "align_upright",
     "prepare_icp_target",
     "register",
 ]
