@@ -51,7 +51,10 @@ def frame_config(args: argparse.Namespace):
 
     seg = {"drop_origin": True, "max_range_m": args.max_range, "voxel_leaf_m": "auto",
            "cluster_tolerance_m": "auto", "max_planes": args.max_planes}
-    return PipelineConfig.from_dict({"segmentation": seg, "border": args.border, "pose_model": args.pose_model})
+    table = {"segmentation": seg, "border": args.border, "pose_model": args.pose_model}
+    if getattr(args, "up", None):
+        table["up_scanner"] = [float(v) for v in args.up.split(",")]
+    return PipelineConfig.from_dict(table)
 
 
 def valve_cluster(result, ransac_xyz_m: np.ndarray):
@@ -176,9 +179,34 @@ def loso_database(data: Path, held_out: str):
     return build_database(views, classes, normal_radius_m="auto", voxel_leaf_m="auto", seed=0)
 
 
+def loso_fused_database(data: Path, held_out: str, up):
+    """The views of every setting but ``held_out``, cleaned and fused per class (``db build --fuse --up``)."""
+    from semslam.io import read_point_cloud
+    from semslam.pipeline.fuse import fuse_class_views
+    from semslam.recognition.database import build_database, folder_classes
+    from semslam.segmentation.clean import clean_view
+
+    items: dict = {}
+    for path in sorted(data.glob("*/*/*/RANSAC.pcd")):
+        cls, setting, frame = path.parts[-4:-1]
+        if setting != held_out:
+            items.setdefault(cls, []).append((f"{setting}_{frame}", clean_view(read_point_cloud(path))[0]))
+    fused, fusion = [], {}
+    for cls, views in sorted(items.items()):
+        out, rep = fuse_class_views(cls, views, up_sensor=up)
+        fused += [(cls, vid, c) for vid, c in out]
+        fusion[cls] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object}
+    db = build_database(fused, folder_classes(fused, {}, Path("classes.json")), normal_radius_m="auto",
+                        voxel_leaf_m="auto", seed=0)
+    object.__setattr__(db, "params", {**db.params, "fusion": fusion})
+    return db
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--db", required=True, help="view database (.npz) of the two valve classes, or 'loso'")
+    ap.add_argument("--db", required=True, help="view database (.npz) of the two valve classes, 'loso' or "
+                                                "'loso-fused' (the other settings' views fused with --up)")
+    ap.add_argument("--up", default=None, help="up in the camera frame, e.g. 0,-1,0: pose kept upright")
     ap.add_argument("--data", default=None, help="the valves folder (default: ../shared/data/real/valves)")
     ap.add_argument("--max-range", type=float, default=0.5)
     ap.add_argument("--max-planes", type=int, default=0)
@@ -195,10 +223,12 @@ def main(argv: list[str] | None = None) -> int:
     if not frames:
         print(f"no valves/CLASS/SETTING/N/Captured_Frame.pcd under {data}", file=sys.stderr)
         return 1
-    if args.db == "loso":
+    up = None if args.up is None else tuple(float(v) for v in args.up.split(","))
+    if args.db in ("loso", "loso-fused"):
         rows = []
         for setting in sorted({f.parts[-3] for f in frames}):
-            recognizer = ScanRecognizer(loso_database(data, setting), frame_config(args))
+            db = loso_database(data, setting) if args.db == "loso" else loso_fused_database(data, setting, up)
+            recognizer = ScanRecognizer(db, frame_config(args))
             recognizer.warm_up()
             rows += [run_frame(recognizer, f, args.seed) for f in frames if f.parts[-3] == setting]
         rows.sort(key=lambda r: (r["class"], r["setting"], r["frame"]))

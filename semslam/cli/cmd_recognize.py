@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._inputs import parse_direction
+
 from .cmd_segment import add_range_options, parse_length, range_fields
 
 
@@ -44,6 +46,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--border", choices=("reject", "flag", "keep"), default=None,
                         help="clusters at the edge of the scan's field of view: rejected as partial objects "
                              "(default), recognised and flagged, or kept")
+    parser.add_argument("--up", type=parse_direction, default=None, metavar="X,Y,Z",
+                        help="up direction in the scan's frame (0,-1,0 for a level camera, y down): classes whose "
+                             "database records their up (db build --fuse --up) are posed upright, no half-turn flips")
     parser.add_argument("--config", help="TOML or JSON file of PipelineConfig fields (a [pipeline] table, or the "
                                          "fields at the top); --descriptor/--classifier/--no-pose override it")
     parser.set_defaults(func=run)
@@ -156,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
         raw["descriptor"] = args.descriptor
     if args.border is not None:
         raw["border"] = args.border
+    if args.up is not None:
+        raw["up_scanner"] = list(args.up)
     raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
     config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "the options")
     t0 = time.perf_counter()

@@ -47,13 +47,14 @@ class FusionReport:
 
     label: str
     poses: str
+    up_object: list | None = None
     rms_m: dict = field(default_factory=dict)
     fitness: dict = field(default_factory=dict)
     doubtful: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return {"label": self.label, "poses": self.poses, "rms_m": self.rms_m, "fitness": self.fitness,
-                "doubtful": self.doubtful}
+        return {"label": self.label, "poses": self.poses, "up_object": self.up_object, "rms_m": self.rms_m,
+                "fitness": self.fitness, "doubtful": self.doubtful}
 
 
 def read_poses_csv(path: str | Path, view_ids: Sequence[str]) -> dict[str, np.ndarray]:
@@ -155,6 +156,9 @@ def fuse_class_views(label: str, clouds: Sequence[tuple[str, PointCloud]], *, po
         report.rms_m[ids[i]] = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("nan")
         if inl.mean() < 0.3:
             report.doubtful.append(ids[i])
+    if up is not None:  # the up direction in the object frame: the sensors' up turned by their poses, averaged
+        ups = np.array([T[:3, :3] @ up for T in Ts]).mean(axis=0)
+        report.up_object = (ups / np.linalg.norm(ups)).tolist()
     fused = np.concatenate([_apply(T, p) for T, p in zip(Ts, pts)])
     centre = 0.5 * (fused.min(axis=0) + fused.max(axis=0))
     out = []
@@ -209,7 +213,9 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
     (``CLASS/poses.csv`` when present, else estimated; see the module docstring) and build the database of
     the fused views, which are also the pose model. ``classes.json`` works as without fusion; sizes not given
     there are the fused model's bounding box. The database's ``params["fusion"]`` records, per class, where
-    the poses came from and the views whose alignment is doubtful (under 30 % of their points within three
+    the poses came from, the up direction in the object frame (``up_object``, with ``up_sensor``: it lets the
+    pipeline keep the object upright, :class:`~semslam.pipeline.PipelineConfig` ``up_scanner``) and the views whose
+    alignment is doubtful (under 30 % of their points within three
     point spacings of the other views). Keyword arguments go to :func:`~semslam.recognition.build_database`.
     """
     from ..recognition.database import build_database, folder_classes, read_view_folder
@@ -225,7 +231,7 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
         out, rep = fuse_class_views(label, items, poses=poses, up_sensor=up_sensor, refine_rounds=refine_rounds,
                                     seed=seed)
         fused += [(label, vid, c) for vid, c in out]
-        reports[label] = {"poses": rep.poses, "doubtful": rep.doubtful,
+        reports[label] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object,
                           "median_rms_m": float(np.nanmedian(list(rep.rms_m.values()))) if rep.rms_m else None}
     db = build_database(fused, folder_classes(fused, declared, meta_path), seed=seed, progress=progress, **kwargs)
     object.__setattr__(db, "params", {**db.params, "fusion": reports})

@@ -96,6 +96,12 @@ class PipelineConfig:
         Added to the rotation variances of a pose that aligns well but whose orientation is ambiguous (another,
         non-equivalent orientation scores within ``pose.min_score_margin``): 0.25 rad^2 (~29 degrees). Such a
         detection stays usable for its position (``extras["orientation_ambiguous"]``).
+    up_scanner : (3,) or None
+        The up direction in the scanner frame (a level camera with y down: ``(0, -1, 0)``; a vehicle: from its
+        attitude). For the classes whose database records their up direction (``db build --fuse --up``), the
+        pose search then keeps the object upright (:func:`~semslam.registration.estimate_object_pose`'s
+        ``up_scanner``/``up_object``), which resolves the half-turn flips of near-symmetric objects;
+        ``extras["pose_upright"]`` says whether it did. None (default): the search spans all of SO(3).
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -112,9 +118,17 @@ class PipelineConfig:
     pose: PoseConfig = field(default_factory=PoseConfig)
     estimate_pose: bool = True
     ambiguous_rotation_variance_rad2: float = 0.25
+    up_scanner: tuple | None = None
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
+        if self.up_scanner is not None:
+            from .._validation import as_float_array
+
+            up = as_float_array("up_scanner", self.up_scanner, (3,), caller=c)
+            if not np.linalg.norm(up) > 1e-9:
+                raise InputError(f"The 'up_scanner' argument of {c} must be a non-zero 3-vector. Got {up.tolist()} instead.")
+            object.__setattr__(self, "up_scanner", tuple(float(v) for v in up))
         check_positive("ambiguous_rotation_variance_rad2", self.ambiguous_rotation_variance_rad2, caller=c)
         check_choice("descriptor", self.descriptor, ("esf", "vfh", "esf+vfh"), caller=c)
         check_choice("classifier", self.classifier, CLASSIFIERS, caller=c)
@@ -414,8 +428,12 @@ class ScanRecognizer:
         info = self.db.class_info(label)
         model = self.pose_model(label, view_index)
         points = scan.points_xyz_m[raw_idx] if len(raw_idx) else cluster.points_xyz_m
+        up_object = (self.db.params.get("fusion") or {}).get(label, {}).get("up_object") \
+            if self.config.up_scanner is not None else None
+        extras["pose_upright"] = up_object is not None
         pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=self.config.pose, seed=seed,
-                                    viewpoint_xyz_m=scan.viewpoint_xyz_m)
+                                    viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=self.config.up_scanner if up_object
+                                    is not None else None, up_object=up_object)
         timings["pose"] += (time.perf_counter() - t0) * 1e3
         cov = pose.covariance_6x6
         ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

@@ -33,6 +33,7 @@ from .covariance import point_to_plane_information, tangent_covariance, xyz_rpy_
 from ._icp_kernels import icp_plane_field, icp_plane_field_batch
 from .icp import ICP_METHODS, IcpTarget, align_icp, prepare_icp_target
 from .result import RegistrationResult, _inlier_statistics_of_distances
+from .upright import upright_rotations
 from .search import (DistanceField, RadiusGrid, RangeImage, RotationHierarchy, rotation_distances, search_hypotheses,
                      so3_grid)
 
@@ -57,6 +58,11 @@ class PoseConfig:
     visibility_voxel_m: float = 0.006
     #: Weight of the visibility cost (share of predicted-visible model points contradicting the scan).
     visibility_weight: float = 1.0
+    #: Weight of the back-facing share in the final score of the refined hypotheses: the share of cluster points
+    #: whose nearest model point faces away from the sensor. It rejects an object turned around (seen from
+    #: behind it would show its other side; the visibility term cannot, since no model point is then predicted
+    #: visible): on the real RealSense globe valve, the handwheel fits from behind as well as from the front.
+    back_facing_weight: float = 1.0
     #: A predicted model point this much in front of the observed surface is in free space.
     visibility_tol_m: float = 0.01
     #: Angular cell of the cluster's range image, as a length at the cluster's range.
@@ -133,7 +139,8 @@ class PoseConfig:
             check_positive(name, getattr(self, name), caller=c)
         for name in ("n_coarse_rotations", "n_coarse_keep"):
             check_int(name, getattr(self, name), caller=c, minimum=0)
-        for name in ("model_icp_voxel_m", "icp_wide_correspondence_m", "visibility_weight", "min_score_margin",
+        for name in ("model_icp_voxel_m", "icp_wide_correspondence_m", "visibility_weight", "back_facing_weight",
+                     "min_score_margin",
                      "min_sigma_translation_m", "min_sigma_rotation_rad"):
             check_positive(name, getattr(self, name), caller=c, allow_zero=True)
         for name in ("coarse_max_iterations", "k_correspondences", "icp_max_iterations", "min_points",
@@ -364,6 +371,8 @@ def estimate_object_pose(
     viewpoint_xyz_m: Any = (0.0, 0.0, 0.0),
     canonical_reference: Any = None,
     init_T_scanner_object: Any = None,
+    up_scanner: Any = None,
+    up_object: Any = None,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -387,6 +396,11 @@ def estimate_object_pose(
     init_T_scanner_object : array-like (4, 4) or RigidTransform, optional
         A prior pose (e.g. predicted from the map by the SLAM): the global search is skipped and ICP
         starts from it.
+    up_scanner, up_object : array-like (3,), optional
+        The up direction in the scanner frame (from the vehicle's attitude, a level camera) and in the
+        object frame (recorded by ``db build --fuse --up``). Given both, the grid search scans only
+        orientations that keep them within a few degrees of each other
+        (:func:`~semslam.registration.upright.upright_rotations`) instead of all of SO(3): an object cannot be found upside down.
 
     Returns
     -------
@@ -428,7 +442,13 @@ def estimate_object_pose(
         extras = {"coarse": coarse.to_dict(), "n_voxels": n_voxels}
         t3 = time.perf_counter()
     else:
-        fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym)
+        upright = None
+        if up_scanner is not None or up_object is not None:
+            if up_scanner is None or up_object is None:
+                raise InputError(f"{_CALLER} needs both 'up_scanner' and 'up_object' (or neither). "
+                                 f"Got up_scanner={up_scanner!r}, up_object={up_object!r}.")
+            upright = upright_rotations(up_scanner, up_object, caller=_CALLER)
+        fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright)
         coarse_ok, coarse_fitness = True, extras["coarse_fitness"]
         t3 = time.perf_counter()
     T_os = fine.T_target_source.matrix  # T_object_scanner
@@ -513,6 +533,20 @@ def _final_score(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: 
     return fit, vis
 
 
+def back_facing_shares(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, Ts: list) -> np.ndarray:
+    """Per ``T_object_scanner`` of ``Ts``: the share of cluster points whose nearest outward model normal faces
+    away from the sensor (0 for a front view, ~1 for the object seen turned around)."""
+    if model.visibility_points is None or not len(model.visibility_points) or not Ts:
+        return np.zeros(len(Ts))
+    tree = cKDTree(model.visibility_points)
+    out = np.empty(len(Ts))
+    for k, T in enumerate(Ts):
+        p = cluster @ T[:3, :3].T + T[:3, 3]
+        j = tree.query(p)[1]
+        out[k] = float(np.mean(np.einsum("ij,ij->i", model.visibility_normals[j], T[:3, :3] @ vp + T[:3, 3] - p) < 0))
+    return out
+
+
 def _final_scores(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig,
                   Ts: list) -> list[tuple[float, float]]:
     """:func:`_final_score` of each of ``Ts`` (the same numbers), with one nearest-point and one visibility call."""
@@ -529,7 +563,7 @@ def _final_scores(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg:
             for k in range(len(Ts))]
 
 
-def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
+def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -541,11 +575,12 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
     pts = voxel_downsample(cluster, cfg.search_voxel_m)
     if len(pts) < 3:
         pts = cluster
+    rotations, hierarchy = (model.rotations, model.rotation_hierarchy) if upright is None else (upright, None)
     hyps, image = search_hypotheses(
-        pts, vp, model.distance_field, model.rotations, model.visibility_points, model.visibility_normals,
+        pts, vp, model.distance_field, rotations, model.visibility_points, model.visibility_normals,
         object_radius_m=model.radius_m, symmetry=sym, image_cell_m=cfg.image_cell_m, tau_m=cfg.fit_tau_m,
         visibility_weight=cfg.visibility_weight, visibility_tol_m=cfg.visibility_tol_m, n_keep=cfg.n_refine,
-        n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=model.rotation_hierarchy,
+        n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
         n_coarse_keep=cfg.n_coarse_keep)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
@@ -565,8 +600,9 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
         else:
             Ts.append(_icp_small_gicp(pts, model, cfg, h.T_object_scanner, wide).T_target_source.matrix)
     # scored on the whole cluster
-    refined = [(fit + cfg.visibility_weight * vis, fit, vis, T, h)
-               for (fit, vis), T, h in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps)]
+    back = back_facing_shares(cluster, vp, model, Ts) if cfg.back_facing_weight > 0 else np.zeros(len(Ts))
+    refined = [(fit + cfg.visibility_weight * vis + cfg.back_facing_weight * b, fit, vis, T, h)
+               for (fit, vis), T, h, b in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps, back)]
     refined.sort(key=lambda x: x[0])
     best = refined[0]
     nearest = None
@@ -585,7 +621,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry):
             margin = other[0] - best[0]
             break
     extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
-              "n_hypotheses": len(model.rotations), "search_points": len(pts),
+              "n_hypotheses": len(rotations), "search_points": len(pts), "upright": upright is not None,
               "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined]}
     return final, best[2], margin, extras, t2, nearest
 

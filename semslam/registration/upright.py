@@ -38,7 +38,7 @@ from ..geometry import RigidTransform
 from ._upright_kernels import fit_translation, point_to_plane_4dof, target_normals, truncated_cost
 from .result import RegistrationResult
 
-__all__ = ["UprightConfig", "align_upright", "rotation_between"]
+__all__ = ["UprightConfig", "align_upright", "rotation_between", "upright_rotations"]
 
 
 @dataclass(frozen=True)
@@ -255,3 +255,27 @@ def _orthonormal(T: np.ndarray) -> np.ndarray:
     out = T.copy()
     out[:3, :3] = R
     return out
+
+
+#: yaw step (degrees) and tilts (degrees, about two horizontal axes) of the gravity-aligned grid search
+UPRIGHT_YAW_STEP_DEG = 2.5
+UPRIGHT_TILTS_DEG = (-6.0, 0.0, 6.0)
+
+
+def upright_rotations(up_scanner: Any, up_object: Any, *, caller: str = "upright_rotations") -> np.ndarray:
+    """Rotations ``R`` of ``T_object_scanner`` (n, 3, 3) with ``R @ up_scanner`` near ``up_object``: every yaw
+    about ``up_object`` at ``UPRIGHT_YAW_STEP_DEG``, each with the tilts of ``UPRIGHT_TILTS_DEG``."""
+    u_s = as_float_array("up_scanner", up_scanner, (3,), caller=caller)
+    u_o = as_float_array("up_object", up_object, (3,), caller=caller)
+    for name, u in (("up_scanner", u_s), ("up_object", u_o)):
+        if np.linalg.norm(u) < 1e-9:
+            raise RegistrationError(f"The '{name}' argument of {caller} must be a non-zero 3-vector. Got {u.tolist()} instead.")
+    u_s, u_o = u_s / np.linalg.norm(u_s), u_o / np.linalg.norm(u_o)
+    R0 = rotation_between(u_s, u_o)
+    h1 = np.cross(u_o, [1.0, 0.0, 0.0] if abs(u_o[0]) < 0.9 else [0.0, 1.0, 0.0])
+    h1 /= np.linalg.norm(h1)
+    h2 = np.cross(u_o, h1)
+    tilts = [Rotation.from_rotvec(np.radians(a) * h1 + np.radians(b) * h2).as_matrix()
+             for a in UPRIGHT_TILTS_DEG for b in UPRIGHT_TILTS_DEG]
+    yaws = Rotation.from_rotvec(np.outer(np.radians(np.arange(0.0, 360.0, UPRIGHT_YAW_STEP_DEG)), u_o)).as_matrix()
+    return np.ascontiguousarray(np.einsum("tij,yjk,kl->tyil", np.array(tilts), yaws, R0).reshape(-1, 3, 3))
