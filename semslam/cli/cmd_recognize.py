@@ -142,7 +142,6 @@ def run(args: argparse.Namespace) -> int:
     from ..io import read_point_cloud
     from ..pipeline import PipelineConfig, ScanRecognizer
     from ..recognition import load_database
-    from ..simulation.builtin_db import builtin_database
     from ._output import emit, to_jsonable
 
     if args.out and Path(args.out).is_dir():  # say so before the work, not after it
@@ -166,7 +165,12 @@ def run(args: argparse.Namespace) -> int:
     raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
     config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "the options")
     t0 = time.perf_counter()
-    db = builtin_database(seed=0) if args.db == "builtin" else load_database(args.db)
+    if args.db == "builtin":
+        from ..simulation.builtin_db import builtin_database  # the simulator (trimesh...) only when asked for
+
+        db = builtin_database(seed=0)
+    else:
+        db = load_database(args.db)
     t_db = (time.perf_counter() - t0) * 1e3
     scan = read_point_cloud(args.scene)
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)

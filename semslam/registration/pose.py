@@ -305,7 +305,7 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
     if 0 < cfg.n_coarse_rotations < cfg.n_rotations and cfg.n_coarse_keep > 0:
         hierarchy = _rotation_hierarchy(cfg.n_rotations, cfg.n_coarse_rotations)
     return PoseModel(pts, down, feats, cKDTree(down), ftree, target, normals, cfg,
-                     distance_field=DistanceField.build(icp_pts, cell_m=cfg.field_cell_m),
+                     distance_field=DistanceField.build_cached(icp_pts, cell_m=cfg.field_cell_m),
                      visibility_points=np.ascontiguousarray(vis_pts), visibility_normals=np.ascontiguousarray(vis_nrm),
                      rotations=rotations, radius_m=float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1)))),
                      rotation_hierarchy=hierarchy,

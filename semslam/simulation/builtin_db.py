@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DatabaseError
+from .._cache import cache_dir
 from ..recognition.database import (
     DEFAULT_NORMAL_RADIUS_M,
     DEFAULT_VOXEL_LEAF_M,
@@ -29,12 +30,6 @@ from ..recognition.database import (
 )
 
 __all__ = ["builtin_database", "cache_dir"]
-
-
-def cache_dir() -> Path:
-    """``$SEMSLAM_CACHE_DIR`` if set, else ``~/.cache/semslam``."""
-    env = os.environ.get("SEMSLAM_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "semslam"
 
 
 def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8, cache: bool = True,
