@@ -162,13 +162,18 @@ class RangeImage:
         rays = points - viewpoint
         rng = np.linalg.norm(rays, axis=1)
         z = rays.mean(axis=0)
-        z /= np.linalg.norm(z)
+        z /= max(np.linalg.norm(z), 1e-300)
         x = np.cross(z, [0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0])
         x /= np.linalg.norm(x)
         F = np.vstack([x, np.cross(z, x), z])
         q = rays @ F.T
+        front = q[:, 2] > 1e-6 * max(float(rng.max(initial=0.0)), 1e-12)  # a point at or behind the sensor has no pixel
+        if not front.any():
+            front = np.ones(len(q), dtype=bool)
+            q = np.c_[q[:, :2], np.ones(len(q))]
+        q, rng = q[front], rng[front]
         uv = q[:, :2] / q[:, 2:3]
-        median_range = float(np.median(rng))
+        median_range = max(float(np.median(rng)), 1e-12)
         cell = cell_m / median_range
         margin = margin_m / median_range
         lo = uv.min(axis=0) - margin
