@@ -52,6 +52,10 @@ def frame_config(args: argparse.Namespace):
     seg = {"drop_origin": True, "max_range_m": args.max_range, "voxel_leaf_m": "auto",
            "cluster_tolerance_m": "auto", "max_planes": args.max_planes}
     table = {"segmentation": seg, "border": args.border, "pose_model": args.pose_model}
+    if getattr(args, "reject_margin", None) is not None:
+        table["reject_margin"] = args.reject_margin
+    if getattr(args, "descriptor", None):
+        table["descriptor"] = args.descriptor
     if getattr(args, "up", None):
         table["up_scanner"] = [float(v) for v in args.up.split(",")]
     return PipelineConfig.from_dict(table)
@@ -206,6 +210,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--db", required=True, help="view database (.npz) of the two valve classes, 'loso' or "
                                                 "'loso-fused' (the other settings' views fused with --up)")
+    ap.add_argument("--reject-margin", type=float, default=None,
+                    help="PipelineConfig.reject_margin (default: the pipeline's, 6, set for laser clusters against "
+                         "Kinect views; a database of the same camera's views needs less)")
+    ap.add_argument("--descriptor", choices=("esf", "vfh", "esf+vfh"), default=None)
     ap.add_argument("--up", default=None, help="up in the camera frame, e.g. 0,-1,0: pose kept upright")
     ap.add_argument("--data", default=None, help="the valves folder (default: ../shared/data/real/valves)")
     ap.add_argument("--max-range", type=float, default=0.5)

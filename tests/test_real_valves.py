@@ -399,3 +399,29 @@ def test_recognize_up_gives_consistent_poses_on_real_frames(tmp_path):
         assert len(globe) == 1 and globe[0]["extras"]["pose_upright"]
         Rs.append(Rotation.from_quat(np.roll(globe[0]["T_sensor_object"]["quat_wxyz"], -1)).as_matrix())
     assert np.degrees(Rotation.from_matrix(Rs[0].T @ Rs[1]).magnitude()) < 10.0
+
+
+def test_recognize_reject_margin_option(tmp_path, capsys):
+    """--reject-margin reaches the pipeline (the threshold scales with it: 1 suits a database of the same camera's
+    views), and a bad value is one line naming the setting and the value."""
+    import json
+
+    cloud, _ = _view(20.0, seed=9)
+    scan = tmp_path / "scan.pcd"
+    write_point_cloud(scan, cloud)
+    _write_views(tmp_path / "views", poses=None)
+    db = tmp_path / "db.npz"
+    assert main(["db", "build", str(tmp_path / "views"), "--fuse", "--up", "0,-1,0", "--out", str(db),
+                 "--esf-samples", "2000"]) == 0
+    thresholds = []
+    for margin in ("1", "2.5"):
+        capsys.readouterr()
+        assert main(["recognize", str(scan), "--db", str(db), "--reject-margin", margin, "--max-planes", "0",
+                     "--voxel", "auto", "--cluster-tolerance", "auto", "--border", "keep", "--no-pose", "--json"]) == 0
+        clusters = json.loads(capsys.readouterr().out)["clusters"]
+        thresholds.append(max(c["threshold"] for c in clusters))
+    assert thresholds[1] == pytest.approx(2.5 * thresholds[0])
+    r = subprocess.run([str(Path(sys.executable).parent / "semslam"), "recognize", str(scan), "--db", str(db),
+                        "--reject-margin", "-1"], capture_output=True, text=True)
+    assert r.returncode == 1 and "one of the options is invalid" in r.stderr and "reject_margin" in r.stderr
+    assert "Got -1.0 instead" in r.stderr and len(r.stderr.strip().splitlines()) == 1

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"The dataset {args.mission!r} has no scans to recognise objects in.")
     raw = read_config_file(args.config) if args.config else {}
     config = PipelineConfig.from_dict(raw.get("pipeline", raw), source=f"the --config file {args.config!r}"
-                                      if args.config else "the options")
+                                      if args.config else "one of the options")
     if args.db == "builtin":
         from ..simulation.builtin_db import builtin_database
 

@@ -46,6 +46,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--border", choices=("reject", "flag", "keep"), default=None,
                         help="clusters at the edge of the scan's field of view: rejected as partial objects "
                              "(default), recognised and flagged, or kept")
+    parser.add_argument("--reject-margin", type=float, default=None, metavar="X",
+                        help="unknown-object threshold = X times the database's own spread (default: the pipeline's "
+                             "6, for laser clusters against Kinect views; 1 when the database holds views from the "
+                             "same sensor, e.g. db build --fuse of your camera's scans)")
     parser.add_argument("--up", type=parse_direction, default=None, metavar="X,Y,Z",
                         help="up direction in the scan's frame (0,-1,0 for a level camera, y down): classes whose "
                              "database records their up (db build --fuse --up) are posed upright, no half-turn flips")
@@ -162,8 +166,10 @@ def run(args: argparse.Namespace) -> int:
         raw["border"] = args.border
     if args.up is not None:
         raw["up_scanner"] = list(args.up)
+    if args.reject_margin is not None:
+        raw["reject_margin"] = args.reject_margin
     raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
-    config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "the options")
+    config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "one of the options")
     t0 = time.perf_counter()
     if args.db == "builtin":
         from ..simulation.builtin_db import builtin_database  # the simulator (trimesh...) only when asked for
