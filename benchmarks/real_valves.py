@@ -118,6 +118,7 @@ def pairs(views: list[dict], baseline: bool) -> list[dict]:
             if baseline:
                 base = register(a["cloud"], b["cloud"], RegisterConfig(time_budget_s=10), seed=0)
                 row["baseline_err_deg"] = angle_deg(np.asarray(base.T_target_source.matrix)[:3, :3].T @ R_true)
+                row["baseline_reliable"] = bool(base.extras.get("reliable", False))
             rows.append(row)
     return rows
 
@@ -149,15 +150,16 @@ def main() -> int:
         ya, yb = int(r["a"].split("/")[0]), int(r["b"].split("/")[0])
         groups.setdefault((r["cls"], min(ya, yb), max(ya, yb)), []).append(r)
     head = "| class | settings | nominal step | pairs | within 10 deg | median error deg | reliable | reliable > 30 deg |"
-    head += " feature reg. within 10 deg |" if args.baseline else ""
+    head += " feature reg. within 10 deg | feature reg. reliable | reliable > 30 deg |" if args.baseline else ""
     print(head)
-    print("|---|---|---:|---:|---:|---:|---:|---:|" + ("---:|" if args.baseline else ""))
+    print("|---|---|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if args.baseline else ""))
     for (cls, ya, yb), rs in sorted(groups.items()):
         e = np.array([r["err_deg"] for r in rs])
         line = (f"| {cls} | yaw {ya} / {yb} | {yb - ya} | {len(rs)} | {int((e <= 10).sum())} | {np.median(e):.1f} | "
                 f"{sum(r['reliable'] for r in rs)} | {sum(r['reliable'] and r['err_deg'] > 30 for r in rs)} |")
         if args.baseline:
-            line += f" {sum(r['baseline_err_deg'] <= 10 for r in rs)} |"
+            line += (f" {sum(r['baseline_err_deg'] <= 10 for r in rs)} | {sum(r['baseline_reliable'] for r in rs)} |"
+                     f" {sum(r['baseline_reliable'] and r['baseline_err_deg'] > 30 for r in rs)} |")
         print(line)
     e = np.array([r["err_deg"] for r in rows])
     print(f"\nall pairs: {int((e <= 10).sum())}/{len(e)} within 10 deg ({100 * np.mean(e <= 10):.0f} %), "
@@ -165,7 +167,9 @@ def main() -> int:
           f"{np.mean([r['s'] for r in rows]) * 1e3:.0f} ms per pair")
     if args.baseline:
         b = np.array([r["baseline_err_deg"] for r in rows])
-        print(f"feature registration: {int((b <= 10).sum())}/{len(b)} within 10 deg ({100 * np.mean(b <= 10):.0f} %)")
+        nb = sum(r["baseline_reliable"] and r["baseline_err_deg"] > 30 for r in rows)
+        print(f"feature registration: {int((b <= 10).sum())}/{len(b)} within 10 deg ({100 * np.mean(b <= 10):.0f} %), "
+              f"{sum(r['baseline_reliable'] for r in rows)} flagged reliable, {nb} of them off by more than 30 deg")
     return 0
 
 

@@ -425,3 +425,28 @@ def test_recognize_reject_margin_option(tmp_path, capsys):
                         "--reject-margin", "-1"], capture_output=True, text=True)
     assert r.returncode == 1 and "one of the options is invalid" in r.stderr and "reject_margin" in r.stderr
     assert "Got -1.0 instead" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_feature_registration_flags_a_half_turn_it_cannot_rule_out():
+    """The 6-DoF register on a near-symmetric real pair (ball valve, yaw 0 onto yaw +30, committed subset): its
+    answer must not be both flagged reliable and more than 30 degrees off the step; the verdict and the three
+    half-turned alternatives are reported."""
+    from semslam.registration import RegisterConfig, register
+
+    sys.path.insert(0, str(BENCH))
+    try:
+        import real_valves
+    finally:
+        sys.path.remove(str(BENCH))
+    views = {(v["cls"], v["setting"], v["frame"]): v for v in real_valves.load_views(SUBSET)}
+    bad = 0
+    for fa, fb in (("1", "1"), ("1", "2"), ("2", "1"), ("2", "2")):
+        a = views[("ball_valve", "pitch000_yaw000_30cm", fa)]
+        b = views[("ball_valve", "pitch000_yaw030_30cm", fb)]
+        res = register(a["cloud"], b["cloud"], RegisterConfig(time_budget_s=10), seed=0)
+        assert {"reliable", "ambiguous", "flip_alternatives"} <= set(res.extras)
+        assert len(res.extras["flip_alternatives"]) == 3
+        err = real_valves.angle_deg(np.asarray(res.T_target_source.matrix)[:3, :3].T
+                                    @ real_valves.rot_about_camera_vertical(30))
+        bad += res.extras["reliable"] and err > 30
+    assert bad == 0

@@ -75,7 +75,7 @@ def test_cli_register_text_on_small_clouds(tmp_path, capsys):
     captured = capsys.readouterr()
     text = captured.out
     assert rc == 0 and captured.err == ""
-    assert "T_target_source (converged):" in text and "fitness" in text and "timings" in text
+    assert "T_target_source (converged, reliable):" in text and "fitness" in text and "timings" in text
     assert "xyz_m [-0.0100, " in text
 
 

@@ -144,6 +144,10 @@ def run(args: argparse.Namespace) -> int:
         xyz, rpy = T.translation_m, np.degrees(T.as_rpy())
         times = ", ".join(f"{k} {v:.0f} ms" for k, v in res.timings_ms.items())
         status = "converged" if res.converged else "NOT converged (no hypothesis reached the inlier fraction)"
+        if "reliable" in res.extras:
+            status += (", reliable" if res.extras["reliable"] else
+                       ", AMBIGUOUS: a half turn fits nearly as well (orientation not to be trusted)"
+                       if res.extras["ambiguous"] else ", NOT reliable: low fitness of the answer")
         if res.extras.get("budget_exhausted"):
             status += f", time budget of {args.time_budget:g} s exhausted"
         return (f"T_target_source ({status}):\n{rows}\n"

@@ -74,6 +74,9 @@ class RegisterConfig:
     max_neighbors: int | None = 200
     #: Raise RegistrationError when a cloud is a line or a plane (unobservable registration).
     check_observability: bool = True
+    #: Compare the answer with its half turns about the source's principal axes and say whether it is
+    #: ``reliable`` or ``ambiguous`` (:mod:`semslam.registration.ambiguity`; three extra ICPs on the voxelised clouds).
+    check_flips: bool = True
 
     def __post_init__(self) -> None:
         c = "RegisterConfig"
@@ -191,12 +194,26 @@ def register(source: Any, target: Any, config: RegisterConfig | None = None, *, 
     timings["icp"] = 1e3 * (time.perf_counter() - t3)
     timings["total"] = 1e3 * (time.perf_counter() - clock.start)
     extras["budget_exhausted"] = extras["budget_exhausted"] or bool(fine.extras.get("budget_exhausted"))
+    extras.update(_verdict(prep, fine, coarse.converged, cfg, voxel))
     return RegistrationResult(
         T_target_source=fine.T_target_source, fitness=fine.fitness, inlier_rmse_m=fine.inlier_rmse_m,
         n_iterations=fine.n_iterations, converged=coarse.converged, timings_ms=timings, n_inliers=fine.n_inliers,
         max_correspondence_m=fine.max_correspondence_m, method=f"prerejective+{fine.method}",
         extras={"coarse": coarse.to_dict(), "icp_converged": fine.converged, **extras},
     )
+
+
+def _verdict(prep: dict, fine: RegistrationResult, converged: bool, cfg: RegisterConfig, voxel: float) -> dict:
+    """``reliable`` / ``ambiguous`` of the answer and its half-turned alternatives (:func:`flip_check`)."""
+    from .ambiguity import MIN_FITNESS, flip_check
+
+    if not cfg.check_flips:
+        return {}
+    chk = flip_check(prep["source"], prep["target"], fine.T_target_source.matrix,
+                     max_correspondence_m=cfg.resolved("icp_max_correspondence_m", voxel))
+    reliable = bool(converged and not chk["ambiguous"] and chk["fitness"] >= MIN_FITNESS)
+    return {"reliable": reliable, "ambiguous": chk["ambiguous"], "flip_check_fitness": chk["fitness"],
+            "flip_alternatives": chk["alternatives"]}
 
 
 def _as_cloud(name: str, value: Any) -> PointCloud:
