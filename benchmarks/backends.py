@@ -1,7 +1,8 @@
 """Backends benchmark (issue 17): the EKF against the GTSAM factor graph (iSAM2 online, batch LM) on the same
 seeded Monte-Carlo missions and detections.
 
-Run: ``.venv/bin/python benchmarks/backends.py [--runs 30] [--scenarios default,heading] [--csv DIR]``, or
+Run: ``.venv/bin/python benchmarks/backends.py [--runs 30] [--scenarios default,heading] [--csv DIR]``
+(``--csv``: the mean error over time per backend and ``DIR/report.html`` with its figure), or
 ``--timing`` for the best-of-3 real-time factor of each backend on mission 0
 (prints markdown tables). Scenarios: ``default`` (the default 3-loop mission, mode ``pose``) and ``heading`` (a 2-degree
 constant AHRS yaw bias, mode ``pose+heading`` with the surveyed ``elbow_1``, as in RESULTS' heading-bias section).
@@ -104,20 +105,24 @@ def table(name: str, rows: dict, n_runs: int) -> str:
     return "\n".join(out)
 
 
-def write_csv(directory: str, name: str, rows: dict) -> None:
-    """Mean error over time per backend (current-time and end-of-dive), for the plot of error over time."""
-    os.makedirs(directory, exist_ok=True)
-    cols, heads = [], []
+def write_csv(directory: str, name: str, rows: dict, n_runs: int, seed0: int = 0) -> None:
+    """Mean error over time per backend (current-time and end-of-dive) as ``error_over_time_<name>.csv`` (+ .json,
+    :mod:`semslam.report.backends`); :func:`main` then writes ``report.html`` with the figure."""
+    from semslam.report.backends import write_error_over_time
+
+    curves, stats = {}, {}
     for b, r in rows.items():
-        for kind in ("online_err", "end_err"):
-            if kind in r and r[kind]:
-                K = min(len(a) for a in r[kind])
-                cols.append(np.mean([a[:K] for a in r[kind]], axis=0))
-                heads.append(f"{b}_{kind.split('_')[0]}_m")
-    K = min(len(c) for c in cols)
-    data = np.column_stack([np.arange(K) * 0.5] + [c[:K] for c in cols])
-    np.savetxt(os.path.join(directory, f"error_over_time_{name}.csv"), data, delimiter=",",
-               header="t_s," + ",".join(heads), comments="", fmt="%.6f")
+        for kind, ate, nees_key in (("online", "ate_on", "online_nees"), ("end", "ate_end", "end_nees")):
+            if r.get(f"{kind}_err"):
+                K = min(len(a) for a in r[f"{kind}_err"])
+                key = f"{b}_{kind}"
+                curves[key] = np.mean([a[:K] for a in r[f"{kind}_err"]], axis=0)
+                stats[key] = {"ate_rmse_mean_m": float(np.mean(r[ate])), "fraction_in_band": _band(r[nees_key])}
+    K = min(len(c) for c in curves.values())
+    sc = SCENARIOS[name]
+    scenario = {"benchmark": "benchmarks/backends.py", "mode": sc["mode"], "n_runs": n_runs, "seed": seed0,
+                "yaw_bias_deg": sc["yaw_bias_deg"], "config_overrides": sc["overrides"]}
+    write_error_over_time(directory, name, np.arange(K) * 0.5, curves, scenario=scenario, stats=stats)
 
 
 def timing(backends, repeats: int = 3) -> str:
@@ -160,7 +165,11 @@ def main(argv=None) -> None:
         print(table(name, rows, args.runs))
         print(f"\n(wall time {time.perf_counter() - t0:.0f} s; load {os.getloadavg()[0]:.1f})\n", flush=True)
         if args.csv:
-            write_csv(args.csv, name, rows)
+            write_csv(args.csv, name, rows, args.runs, args.seed)
+    if args.csv:
+        from semslam.report.backends import build_backends_report
+
+        print(f"report: {build_backends_report(args.csv)}")
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Callable
@@ -61,6 +61,11 @@ class MonteCarloResult:
     error_runs: dict  #: mode -> (N, K) position error (m)
     run_metrics: dict  #: mode -> list of metrics dicts
     summary: dict
+    #: mode -> (N, K) error of the trajectory as held at the end of the dive (EKF: its RTS smoother; isam2 / batch:
+    #: the graph's final estimate), or None when the runs have none
+    end_error_runs: dict = field(default_factory=dict)
+    backend: str = "ekf"
+    settings: dict = field(default_factory=dict)  #: what defines the missions (seed, yaw bias, loops, overrides ...)
 
     def table(self) -> str:
         """Markdown table of the summary."""
@@ -126,7 +131,9 @@ def _montecarlo_run(i: int, *, opts: dict) -> dict:
         e = res.position_ned_m - res.truth_position_ned_m
         smoothed = None if res.smoothed_position_ned_m is None else nees(
             res.smoothed_position_ned_m - res.truth_position_ned_m, res.smoothed_position_cov_m2)
-        out[mode] = {"nees": nees(e, res.position_cov_m2), "nees_smoothed": smoothed,
+        end = None if res.smoothed_position_ned_m is None else np.linalg.norm(
+            res.smoothed_position_ned_m - res.truth_position_ned_m, axis=1)
+        out[mode] = {"nees": nees(e, res.position_cov_m2), "nees_smoothed": smoothed, "error_end": end,
                      "sigma3": 3.0 * np.sqrt(np.trace(res.position_cov_m2, axis1=1, axis2=2)),
                      "error": np.linalg.norm(e, axis=1), "metrics": res.metrics,
                      "stamps_s": res.stamps_s - res.stamps_s[0]}
@@ -147,7 +154,8 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     per run and mode (its ATE). ``jobs`` / ``scheduler`` / ``client``: the engine (serial in this process, a local Dask
     cluster of ``jobs`` processes, a running cluster; :func:`semslam.experiments._dask.map_tasks`): same result.
     ``backend``: the estimator (``ekf``; ``isam2`` or ``batch``: the GTSAM factor graph, whose smoothed trajectory
-    is its whole-dive estimate), with the same missions and detections for every backend.
+    is its whole-dive estimate), with the same missions and detections for every backend; the result's
+    ``end_error_runs`` holds the error of that whole-dive estimate (the EKF's: its RTS smoother) per run and epoch.
     Summary per mode: ATE (mean, median, max), DR/mode ATE ratio, final error, mean 3-sigma at 1/3, 2/3 and
     the end of the mission, position ANEES with its band and the fraction of epochs in it, and the landmark
     ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
@@ -167,6 +175,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     nees_s: dict = {m: [] for m in modes}
     sig_r: dict = {m: [] for m in modes}
     err_r: dict = {m: [] for m in modes}
+    end_r: dict = {m: [] for m in modes}
     met: dict = {m: [] for m in modes}
     stamps = None
     opts = {"seed": seed, "modes": modes, "yaw_bias_rad": math.radians(yaw_bias_deg), "source": source, "loops": loops,
@@ -191,6 +200,8 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
                 nees_s[mode].append(r["nees_smoothed"])
             sig_r[mode].append(r["sigma3"])
             err_r[mode].append(r["error"])
+            if r.get("error_end") is not None:
+                end_r[mode].append(r["error_end"])
             met[mode].append(r["metrics"])
             if stamps is None or len(r["stamps_s"]) < len(stamps):
                 stamps = r["stamps_s"]
@@ -230,8 +241,10 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
             if "smoothed" in summary[mode] and "smoothed" in summary["dr"]:
                 summary[mode]["smoothed"]["dr_over_mode_ate"] = (summary["dr"]["smoothed"]["ate_rmse_mean_m"]
                                                                  / max(summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12))
+    ends = {m: np.array([a[:K] for a in end_r[m]]) if len(end_r[m]) == n_runs else None for m in modes}
+    settings = {k: v for k, v in opts.items() if k not in ("modes", "backend")}
     return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
-                            {m: out[m][2] for m in modes}, met, summary)
+                            {m: out[m][2] for m in modes}, met, summary, ends, backend, settings)
 
 
 #: mode -> the mode it is meant to improve on (paired comparison on the same missions)
@@ -283,13 +296,20 @@ def _landmark_anees(per_run: list, dof: int) -> dict:
             "fraction_in_95": float(np.mean((v >= lo) & (v <= hi)))}
 
 
-def write_montecarlo(result: MonteCarloResult, out_dir: str | Path) -> Path:
-    """``summary.json``, ``summary.md`` and per mode ``anees_<mode>.csv`` (epoch, ANEES, mean error, mean 3-sigma)."""
+def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, report: bool = True) -> Path:
+    """``summary.json``, ``summary.md``, per mode ``anees_<mode>.csv`` (epoch, ANEES, mean error, mean 3-sigma) and
+    ``error_over_time_<mode>.csv`` (+ ``.json``: the mean position error over time of the current-time and of the
+    end-of-dive estimates, :mod:`semslam.report.backends`), and ``report.html`` (``report``; figures embedded).
+    Monte Carlos of several backends written to sibling directories are compared in one report by
+    ``semslam report PARENT``."""
     from .._jsonable import to_jsonable
+    from ..report.backends import build_backends_report, write_montecarlo_curves
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "summary.json", json.dumps(to_jsonable({"n_runs": result.n_runs, "summary": result.summary,
+    atomic_write_text(out / "summary.json", json.dumps(to_jsonable({"n_runs": result.n_runs, "backend": result.backend,
+                                                                    "settings": result.settings,
+                                                                    "summary": result.summary,
                                                                     "runs": result.run_metrics}), indent=2) + "\n")
     atomic_write_text(out / "summary.md", result.table() + "\n")
     for mode in result.modes:
@@ -299,4 +319,7 @@ def write_montecarlo(result: MonteCarloResult, out_dir: str | Path) -> Path:
         lines = ["t_s,anees,mean_error_m,mean_3sigma_m"] + [f"{t:.3f},{x:.6g},{y:.6g},{z:.6g}"
                                                             for t, x, y, z in zip(result.stamps_s, a, e, s)]
         atomic_write_text(out / f"anees_{mode.replace('+', '_')}.csv", "\n".join(lines) + "\n")
+    write_montecarlo_curves(result, out)
+    if report:
+        build_backends_report(out)
     return out

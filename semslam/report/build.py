@@ -135,6 +135,10 @@ def build_report(run_dir: str | Path) -> Path:
     sec = _guarded(_section_consensus, run_dir, plt, what="consensus.json")
     sections.append(sec) if sec else missing.append("consensus initialisation (consensus.json)")
     if not sections:
+        from .backends import build_backends_report, find_curve_files
+
+        if find_curve_files(run_dir):  # Monte-Carlo outputs (one backend, or one sub-directory per backend)
+            return build_backends_report(run_dir)
         raise ReportError(f"nothing to report in {run_dir}: none of the expected outputs is there")
     sec = summary_section(run_dir, slam_runs)
     if sec:
@@ -361,7 +365,9 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
     sec = Section("Fig. 4: dead reckoning and SLAM trajectories",
                   "All modes run on the same navigation data and the same detections. Ellipses: 3-sigma position "
                   "uncertainty in the horizontal plane; stars: true object positions; crosses: mapped landmarks.",
-                  tables=[("Trajectory metrics per mode (smoothed: RTS over the whole mission, offline)",
+                  tables=[("Trajectory metrics per mode (smoothed: RTS over the whole mission, offline"
+                           + ("; with a graph backend, the graph's estimate at the end of the dive)"
+                              if any(m.get("backend") in ("isam2", "batch") for m in metrics.values()) else ")"),
                            ["mode", "ATE RMSE (m)", "smoothed ATE RMSE (m)", "final error (m)", "max error (m)",
                             "mean position NEES (dof 3)", "landmarks"], rows)],
                   figures=[Figure("fig4_trajectories.png", figure_to_png(fig), "Trajectories, 3-sigma ellipses, landmarks.")])
@@ -381,7 +387,12 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
                                 figures=[Figure("fig6_error_bounds.png", figure_to_png(fig), "Errors and 3-sigma bounds.")]))
         smoothed = {mode: load_trajectory_csv(d / "trajectory_smoothed.csv") for mode, d in runs.items()
                     if (d / "trajectory_smoothed.csv").is_file()}
-        if smoothed:
+        graph = sorted({m.get("backend") for m in metrics.values()} & {"isam2", "batch"})
+        if smoothed and graph:
+            from .backends import section_graph_run
+
+            sections.append(section_graph_run(graph[0], trajs, smoothed, truth, plt))
+        elif smoothed:
             fig, ax = plt.subplots(figsize=(10, 3.8))
             plot_smoothed_errors(ax, trajs, smoothed, truth,
                                  title="Position error: online filter (solid) and RTS-smoothed trajectory (dotted)")

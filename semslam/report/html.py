@@ -77,11 +77,11 @@ details{margin:1em 0}summary{cursor:pointer;font-weight:600}.verdict-met{color:#
 
 
 def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *, metrics: dict | None = None,
-                 summary: str = "") -> Path:
+                 summary: str = "", figure_files: bool = True) -> Path:
     """Write every figure as PNG into ``run_dir/figures`` and ``run_dir/report.html`` (atomically).
 
     ``metrics``: the run's metrics, linked as ``metrics.json`` (written beside the report when it is not there
-    yet), never dumped into the page. Tables longer than :data:`COLLAPSE_ROWS` rows are collapsed. Returns the
+    yet), never dumped into the page. ``figure_files``: False embeds the figures only (no ``figures/``). Tables longer than :data:`COLLAPSE_ROWS` rows are collapsed. Returns the
     report's path.
     """
     run_dir = Path(run_dir)
@@ -96,7 +96,8 @@ def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *
         for caption, header, rows in sec.tables:
             parts.append(_table_html(caption, header, rows))
         for fig in sec.figures:
-            atomic_write_bytes(run_dir / "figures" / fig.filename, fig.png)
+            if figure_files:
+                atomic_write_bytes(run_dir / "figures" / fig.filename, fig.png)
             b64 = base64.b64encode(fig.png).decode("ascii")
             parts.append(f"<figure><img alt='{html.escape(fig.caption)}' src='data:image/png;base64,{b64}'>"
                          f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>")

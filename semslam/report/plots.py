@@ -127,13 +127,14 @@ def plot_error_bounds(axes, runs: dict, truth: dict, *, detection_stamps_s: Sequ
         axes[0].set_title(title)
 
 
-def plot_smoothed_errors(ax, filtered: dict, smoothed: dict, truth: dict, *, title: str = "") -> None:
+def plot_smoothed_errors(ax, filtered: dict, smoothed: dict, truth: dict, *, title: str = "",
+                         names: tuple[str, str] = ("online", "smoothed")) -> None:
     """Position error norm over time of each mode's online estimate (solid) and of its RTS-smoothed
     trajectory (dotted). ``filtered`` and ``smoothed`` map a mode to ``stamp_s`` and ``position_ned_m``;
-    ``truth`` has ``stamp_s`` and ``position_ned_m``."""
+    ``truth`` has ``stamp_s`` and ``position_ned_m``; ``names``: the two estimates' names in the legend."""
     for mode, run in filtered.items():
         colour = MODE_COLOURS.get(mode, None)
-        for style, r, what in (("-", run, "online"), (":", smoothed.get(mode), "smoothed")):
+        for style, r, what in (("-", run, names[0]), (":", smoothed.get(mode), names[1])):
             if r is None:
                 continue
             t = np.asarray(r["stamp_s"])
@@ -147,6 +148,24 @@ def plot_smoothed_errors(ax, filtered: dict, smoothed: dict, truth: dict, *, tit
     ax.legend(fontsize=7, loc="upper left", ncol=2)
     if title:
         ax.set_title(title)
+
+
+def plot_backend_errors(ax, series: dict, *, styles: dict, title: str = "") -> None:
+    """Mean position error over time, one line per estimate: ``series`` maps a name to ``(t_s, error_m)``;
+    ``styles`` a name to ``(label, colour, line style)`` (a name not there: its own label, default style)."""
+    order = list(styles)
+    for i, name in enumerate(sorted(series, key=lambda s: order.index(s) if s in order else len(order))):
+        t, e = series[name]
+        label, colour, ls = styles.get(name, (name, None, "-"))
+        # lines drawn first are wider: estimates that coincide (iSAM2's current-time and the EKF's) stay visible
+        ax.plot(np.asarray(t), np.asarray(e), color=colour, ls=ls, lw=max(2.4 - 0.35 * i, 0.9), label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("mean position error [m]")
+    ax.set_ylim(bottom=0.0)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", ncol=2)
+    if title:
+        ax.set_title(title, fontsize=9)
 
 
 def plot_nees(ax, stamp_s: np.ndarray, nees: np.ndarray, band: tuple[float, float], *, dof: int,

@@ -129,19 +129,40 @@ class SlamSession:
                                                                           max(d.misalignment_sigma_rad, 1e-6) ** 2]
         if heading:
             var0 += [cfg.motion.yaw_bias_sigma_rad ** 2]
-        ekf = SemanticEkf(self._p0, self._v0, np.diag(var0), yaw_bias=heading, dvl_calibration=calib,
-                          dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
-                          dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps, dvl_slope_bias_tau_s=d.degraded_bias_tau_s)
+        ekf = self._make_filter(self._p0, self._v0, np.diag(var0), yaw_bias=heading, dvl_calibration=calib,
+                                dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
+                                dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps,
+                                dvl_slope_bias_tau_s=d.degraded_bias_tau_s)
         ekf.constrain_heading_nullspace(heading and cfg.motion.observability_constrained)
-        if cfg.output.smooth:
-            ekf.recorder = RtsRecorder(n_keep=6, max_bytes=cfg.output.smoother_max_mb * 1e6)
+        ekf.recorder = self._make_recorder()
         self.ekf = ekf
         self.t = self._t0
-        self.mapper = ObjectMapper(ekf, cfg, self.mode, self.symmetries, vehicle.T_vehicle_scanner, self._log)
+        self._filter_ready(ekf)
+        self.mapper = self._make_mapper(ekf)
         if self._surveyed:
             names, labels, poses = zip(*self._surveyed)
             self.mapper.add_surveyed(self._t0, names, labels, poses, cfg.initialisation.survey_position_sigma_m,
                                      cfg.initialisation.survey_rotation_sigma_rad)
+
+    # Factory hooks of :meth:`_start`: a backend subclass (the factor graph's
+    # :class:`~semslam.slam.graph.GraphSession`) replaces the filter, the smoother's recorder and the mapper here.
+    def _make_filter(self, x0_position, v0_body, P0, **kw) -> SemanticEkf:
+        """The filter (the arguments of :class:`SemanticEkf`)."""
+        return SemanticEkf(x0_position, v0_body, P0, **kw)
+
+    def _make_recorder(self) -> RtsRecorder | None:
+        """The RTS smoother's recorder (None: no smoothed trajectory)."""
+        if not self.cfg.output.smooth:
+            return None
+        return RtsRecorder(n_keep=6, max_bytes=self.cfg.output.smoother_max_mb * 1e6)
+
+    def _filter_ready(self, ekf: SemanticEkf) -> None:
+        """Called once the filter holds its initial state (heading constraint applied), before the mapper is made
+        and before the surveyed landmarks are added."""
+
+    def _make_mapper(self, ekf: SemanticEkf) -> ObjectMapper:
+        """The object mapper (gating, association, consensus initialisation) over ``ekf``."""
+        return ObjectMapper(ekf, self.cfg, self.mode, self.symmetries, self.vehicle.T_vehicle_scanner, self._log)
 
     def add_surveyed_landmarks(self, names, labels, T_world_objects) -> None:
         """Landmarks known a priori (a surveyed structure), to ``config.initialisation.survey_position_sigma_m`` and

@@ -2,6 +2,17 @@
 
 Every call into GTSAM goes through :meth:`GraphBackend._gtsam`, which turns an exception raised inside GTSAM
 (an indeterminate system, a refused noise model) into a :class:`~semslam.errors.SlamError` saying what failed.
+
+Cost. GTSAM's Python wrapper hands a Python error function (a ``CustomFactor``) a *copy* of the whole ``Values``,
+so each linearisation of a ``CustomFactor`` costs O(size of the graph): iSAM2's update time grew linearly with the
+dive (9 ms per update at 1,000 landmarks). So iSAM2 holds only native factors: the linear ones
+(:func:`~semslam.slam.graph.factors.linear_factor`) and the detection factors linearised here at their variables'
+linearisation points (the values the variables were created with, as iSAM2 linearises a new factor), relinearised
+here when a variable's estimate moves more than ``relinearize_threshold`` from that point (iSAM2's own rule, checked
+on the variables of each update's new detection factors, and on every variable at :meth:`solve`; with a robust
+kernel, :meth:`solve` reweights every detection factor at the final estimate, as batch does). iSAM2's own
+relinearisation is off (``relinearize_skip`` is kept for the signature): every factor it holds is linear. Batch keeps
+the nonlinear factors (Levenberg-Marquardt relinearises them at every iteration).
 """
 
 from __future__ import annotations
@@ -37,12 +48,20 @@ class GraphBackend:
         self.iterations = 0  #: of the batch optimisation
         self._marg = None
         self._best = None
+        self.last_result = None  #: iSAM2: the ISAM2Result of the last update (variables re-eliminated, relinearised)
+        self.relinearize_threshold = float(relinearize_threshold)
+        self.robust = False  #: a detection factor has a robust kernel
+        self.n_relinearized = 0  #: detection factors relinearised (iSAM2)
+        self._theta: dict[int, np.ndarray] = {}  #: iSAM2: linearisation point of each variable
+        self._lm: dict[int, list] = {}  #: iSAM2: variable -> records of its detection factors
+        self._pending: list = []  #: iSAM2: (position in the new factors, record) of the detection factors not yet in
         if kind == "isam2":
             p = gtsam.ISAM2Params()
             p.setRelinearizeThreshold(relinearize_threshold)
             p.relinearizeSkip = relinearize_skip
             p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(wildfire))
             p.setFactorization("QR")  # the tightly known calibration states make the Hessian ill-conditioned
+            p.enableRelinearization = False  # every factor it holds is linear; detection factors: relinearised here
             self.isam = gtsam.ISAM2(p)
 
     # ------------------------------------------------------------------ building
@@ -60,12 +79,60 @@ class GraphBackend:
         self._new_v.insert(key, x)
         if self.kind == "batch":
             self._all_v.insert(key, x)
+        else:
+            self._theta[key] = x
 
     def add_factor(self, f) -> None:
         self._new_f.add(f)
         if self.kind == "batch":
             self._all_f.add(f)
         self.n_factors += 1
+
+    def add_landmark_factor(self, keys: tuple[int, int], make, robust: bool = False) -> None:
+        """A detection factor on ``keys``; ``make(linearize_at=None)`` builds it (see the module docstring);
+        ``robust``: it has a robust kernel (its weight is then recomputed at the final estimate, :meth:`solve`)."""
+        self.robust = self.robust or bool(robust)
+        if self.kind == "batch":
+            self.add_factor(make())
+            return
+        missing = [k for k in keys if k not in self._theta]
+        if missing:
+            raise SlamError(f"A detection factor of the factor-graph backend refers to variables the graph does not "
+                            f"have: {[gtsam.DefaultKeyFormatter(k) for k in missing]}.")
+        rec = {"keys": tuple(keys), "make": make, "index": None}
+        self._pending.append((self._new_f.size(), rec))
+        self.add_factor(make(linearize_at=[self._theta[k] for k in keys]))
+        for k in keys:
+            self._lm.setdefault(k, []).append(rec)
+
+    def _relinearize(self, keys, estimate=None, threshold: float | None = None) -> int:
+        """Relinearise the detection factors on those of ``keys`` whose estimate (``estimate``: a ``Values``;
+        default iSAM2's current one) moved more than ``threshold`` (default ``relinearize_threshold``) from their
+        linearisation point."""
+        thr = self.relinearize_threshold if threshold is None else threshold
+        moved = []
+        for k in keys:
+            if k not in self._lm:
+                continue
+            x = np.asarray(estimate.atVector(k) if estimate is not None else
+                           self._gtsam("the iSAM2 estimate", self.isam.calculateEstimateVector, k))
+            if np.abs(x - self._theta[k]).max() > thr:
+                moved.append((k, x))
+        if not moved:
+            return 0
+        recs = {id(r): r for k, x in moved for r in self._lm[k]}
+        for k, x in moved:
+            self._theta[k] = x
+        graph, remove = gtsam.NonlinearFactorGraph(), []
+        for r in recs.values():
+            graph.add(r["make"](linearize_at=[self._theta[k] for k in r["keys"]]))
+            remove.append(r["index"])
+        res = self._gtsam("an iSAM2 relinearisation", self.isam.update, graph, gtsam.Values(), remove)
+        for r, i in zip(recs.values(), res.getNewFactorsIndices()):
+            r["index"] = int(i)
+        self.n_relinearized += len(recs)
+        self._best = None
+        return len(recs)
 
     @property
     def key(self) -> int:
@@ -105,18 +172,29 @@ class GraphBackend:
         if self.kind != "isam2" or (self._new_f.size() == 0 and self._new_v.size() == 0):
             return
         t0 = time.perf_counter()
-        self._gtsam("an iSAM2 update", self.isam.update, self._new_f, self._new_v)
-        self.update_s.append(time.perf_counter() - t0)
-        self._best = None
+        self.last_result = res = self._gtsam("an iSAM2 update", self.isam.update, self._new_f, self._new_v)
         self._new_f, self._new_v = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        self._best = None
+        if self._pending:
+            idx = res.getNewFactorsIndices()
+            for pos, r in self._pending:
+                r["index"] = int(idx[pos])
+            keys = {k for _, r in self._pending for k in r["keys"]}
+            self._pending = []
+            self._relinearize(sorted(keys))
+        self.update_s.append(time.perf_counter() - t0)
 
     # ------------------------------------------------------------------ solving and reading
     def solve(self, max_iterations: int = 50) -> None:
         """Final estimate: iSAM2 (extra relinearisation rounds, then a full back-substitution) or batch LM."""
         if self.kind == "isam2":
             self.flush()
+            # relinearisation rounds over every variable; with a robust kernel every detection factor that moved at all
+            # (its weight is that of its linearisation point: reweighted at the final estimate, as batch LM does)
             for _ in range(3):
-                self._gtsam("an iSAM2 update", self.isam.update)
+                self.result = self._gtsam("the iSAM2 estimate", self.isam.calculateBestEstimate)
+                if not self._relinearize(sorted(self._lm), self.result, 1e-6 if self.robust else None):
+                    break
             self.result = self._gtsam("the iSAM2 estimate", self.isam.calculateBestEstimate)
             return
         p = gtsam.LevenbergMarquardtParams()

@@ -5,7 +5,7 @@ Variables: per keyframe the vehicle state ``X = [p (3), v (3), (DVL calibration 
 NED, m, rad). The attitude is the AHRS input, as in the filter.
 
 * :func:`segment_factor`: the pre-integrated prediction + DVL + depth rows between two keyframes
-  (:mod:`~semslam.slam.graph.segment`), linear, whitened;
+  (:mod:`~semslam.slam.graph.segment`), linear, whitened (native, :func:`linear_factor`);
 * :func:`landmark_factor`: one detection of landmark ``j`` from keyframe ``k``, the filter's measurement model
   (:func:`~semslam.slam.association.innovation`: position rows, and the observed rotation rows with the rotation
   a symmetric class leaves unobservable projected out; the symmetry alignment is redone at every linearisation),
@@ -53,50 +53,38 @@ def gaussian(cov: np.ndarray, what: str) -> gtsam.noiseModel.Base:
         raise SlamError(f"The covariance of {what} was refused by GTSAM: {exc}") from None
 
 
-def _wrap_angles(e: np.ndarray, sl: slice) -> np.ndarray:
-    e = e.copy()
-    e[sl] = kern_wrap(e[sl])
-    return e
+def linear_factor(keys, As, b: np.ndarray, W: np.ndarray | None = None):
+    """``sum_i A_i X_i - b`` (rows whitened by ``W``, ``W^T W`` the information; None: already whitened) as a native
+    GTSAM factor: a ``JacobianFactor`` held by a ``LinearContainerFactor`` at ``X = 0`` (exact for a linear model).
 
-
-def kern_wrap(a):
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+    Native, not a ``CustomFactor``: GTSAM's Python wrapper passes a copy of the whole ``Values`` to a Python error
+    function, so every linearisation of a ``CustomFactor`` costs O(size of the graph) (it made iSAM2's update time
+    grow linearly with the dive, and batch's iterations quadratically)."""
+    b = np.asarray(b, dtype=float)
+    As = [np.asarray(A, dtype=float) for A in As]
+    if W is not None:
+        As, b = [W @ A for A in As], W @ b
+    args: list = []
+    lin = gtsam.Values()
+    for k, A in zip(keys, As):
+        args += [k, np.ascontiguousarray(A)]
+        lin.insert(k, np.zeros(A.shape[1]))
+    jf = gtsam.JacobianFactor(*args, np.ascontiguousarray(b), gtsam.noiseModel.Unit.Create(len(b)))
+    return gtsam.LinearContainerFactor(jf, lin)
 
 
 def prior_factor(key: int, mean: np.ndarray, cov: np.ndarray, what: str, angles: slice | None = None):
+    """``X - mean`` with covariance ``cov`` (linear: ``angles``, the rows that are angles, need no wrapping, since
+    the variable starts at the mean and the graph never wraps a value)."""
     mean = np.asarray(mean, dtype=float).copy()
-    n = len(mean)
-    noise = gaussian(cov, what)
-
-    def err(this, values, H):
-        e = values.atVector(key) - mean
-        if angles is not None:
-            e = _wrap_angles(e, angles)
-        if H is not None:
-            H[0] = np.eye(n)
-        return e
-
-    return gtsam.CustomFactor(noise, [key], err)
+    return linear_factor([key], [np.eye(len(mean))], mean, gaussian(cov, what).R())
 
 
 def segment_factor(k0: int, k1: int | None, A0: np.ndarray, A1: np.ndarray, b: np.ndarray):
     """``A0 X_k0 + A1 X_k1 - b`` (whitened rows: unit noise); unary on ``k0`` when ``k1`` is None."""
-    m = len(b)
-    noise = gtsam.noiseModel.Unit.Create(m)
     if k1 is None:
-        def err1(this, values, H):
-            if H is not None:
-                H[0] = A0
-            return A0 @ values.atVector(k0) - b
-        return gtsam.CustomFactor(noise, [k0], err1)
-
-    def err(this, values, H):
-        if H is not None:
-            H[0] = A0
-            H[1] = A1
-        return A0 @ values.atVector(k0) + A1 @ values.atVector(k1) - b
-
-    return gtsam.CustomFactor(noise, [k0, k1], err)
+        return linear_factor([k0], [A0], b)
+    return linear_factor([k0, k1], [A0, A1], b)
 
 
 @dataclass
@@ -143,7 +131,8 @@ def _observed_basis(axes_w: np.ndarray) -> np.ndarray:
 
 def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarray, which: str, noise_cov: np.ndarray,
                     *, n_v: int, yaw_bias: bool, i_yaw: int, orientation_innovation: str = "rotvec",
-                    huber_k: float | None = None, what: str = "a detection", yaw_bias_lin: float = 0.0):
+                    huber_k: float | None = None, what: str = "a detection", yaw_bias_lin: float = 0.0,
+                    linearize_at: tuple | None = None):
     """The filter's object measurement (rows ``which``: ``pose`` or ``position``) as a factor on ``(X_k, L_j)``;
     ``noise_cov`` the rows' noise at the filter's decision (detection + AHRS parts), expressed, for a rotation with
     a free axis, in the basis of the observed directions at that decision (``yaw_bias_lin``: the filter's yaw bias
@@ -151,7 +140,11 @@ def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarra
     turn within it).
 
     Error ``h(X, L) - z``, the negated innovation of :func:`innovation` (the same model, rows and Jacobians; the
-    ``rotvec`` form is evaluated here directly, the ``rpy`` form through :func:`innovation` itself)."""
+    ``rotvec`` form is evaluated here directly, the ``rpy`` form through :func:`innovation` itself).
+
+    ``linearize_at``: ``(x_k, l_j)``: the factor linearised there (:func:`linearized`, native) instead of the
+    ``CustomFactor`` (which the optimiser relinearises itself, but every linearisation of which costs O(size of the
+    graph): GTSAM's wrapper copies the whole ``Values`` for the Python error function)."""
     noise = gaussian(noise_cov, what)
     if huber_k is not None:
         noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(float(huber_k)), noise)
@@ -170,7 +163,8 @@ def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarra
                 H[1] = np.ascontiguousarray(Hc[:, n_v:])
             return -nu
 
-        return gtsam.CustomFactor(noise, [kx, kl], err_generic)
+        f = gtsam.CustomFactor(noise, [kx, kl], err_generic)
+        return f if linearize_at is None else linearized(f, linearize_at)
 
     z_p, R_vo, U = meas.p_vehicle_object_m, meas.R_vehicle_object, meas.unobservable_axes_vehicle
     ez = np.array([0.0, 0.0, 1.0])
@@ -217,21 +211,23 @@ def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarra
             H[0], H[1] = Hx, Hl
         return e
 
-    return gtsam.CustomFactor(noise, [kx, kl], err)
+    f = gtsam.CustomFactor(noise, [kx, kl], err)
+    return f if linearize_at is None else linearized(f, linearize_at)
 
 
 def landmark_init_factor(kx: int, kl: int, pose0: np.ndarray, G: np.ndarray, x_lin: np.ndarray, cov: np.ndarray,
                          what: str = "a new landmark"):
-    """``L - pose0 - G (X_k - x_lin)`` with covariance ``cov`` (the filter's state augmentation, angles wrapped)."""
+    """``L - pose0 - G (X_k - x_lin)`` with covariance ``cov`` (the filter's state augmentation; linear, as
+    :func:`prior_factor`: the landmark starts at ``pose0``, so its angles need no wrapping)."""
     pose0, G, x_lin = (np.asarray(a, dtype=float).copy() for a in (pose0, G, x_lin))
-    noise = gaussian(cov, what)
-    eye = np.eye(6)
+    return linear_factor([kx, kl], [-G, np.eye(6)], pose0 - G @ x_lin, gaussian(cov, what).R())
 
-    def err(this, values, H):
-        e = values.atVector(kl) - pose0 - G @ (values.atVector(kx) - x_lin)
-        if H is not None:
-            H[0] = -G
-            H[1] = eye
-        return _wrap_angles(e, slice(3, 6))
 
-    return gtsam.CustomFactor(noise, [kx, kl], err)
+
+def linearized(factor, at) -> gtsam.LinearContainerFactor:
+    """The nonlinear ``factor`` linearised by GTSAM at ``at`` (one vector per key of the factor: whitening and a
+    robust kernel's weight as GTSAM's own linearisation gives them there), held as a native factor."""
+    vals = gtsam.Values()
+    for k, x in zip(factor.keys(), at):
+        vals.insert(k, np.asarray(x, dtype=float))
+    return gtsam.LinearContainerFactor(factor.linearize(vals), vals)

@@ -12,6 +12,8 @@ cascade, consensus initialisation: one association module for every backend), an
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from .. import _ekf_kernels as kern
@@ -21,7 +23,8 @@ from . import factors as fac
 
 
 class FrontEkf(SemanticEkf):
-    """:class:`SemanticEkf` that mirrors its operations into ``self.backend`` (set by the session)."""
+    """:class:`SemanticEkf` that mirrors its operations into ``self.backend`` (a
+    :class:`~semslam.slam.graph.backend.GraphBackend`, set by :meth:`GraphSession._make_filter`)."""
 
     backend = None
     huber_k = None
@@ -86,9 +89,12 @@ class FrontEkf(SemanticEkf):
 
 
 class GraphMapper(ObjectMapper):
-    """:class:`ObjectMapper` whose accepted landmark updates also become graph factors."""
+    """:class:`ObjectMapper` whose accepted landmark updates also become graph factors; ``records`` the session's
+    log (where the mapper's decisions are read back)."""
 
-    records: list = []
+    def __init__(self, *args, records: list, **kw) -> None:
+        super().__init__(*args, **kw)
+        self.records = records
 
     def process(self, t, dets, R_ahrs, att_cov):
         ekf = self.ekf
@@ -105,7 +111,7 @@ class GraphMapper(ObjectMapper):
         which = new[-1]["test"]
         Rn = ekf.last_update[3]
         b = ekf.backend
-        b.add_factor(fac.landmark_factor(b.key, fac.L(j), x, R_ahrs, which, Rn, n_v=ekf.n_v, yaw_bias=ekf.yaw_bias,
-                                         i_yaw=ekf.i_yaw, orientation_innovation=ekf.orientation_innovation,
-                                         huber_k=ekf.huber_k, what=f"detection {x.index} at {t!r} s ({x.label})",
-                                         yaw_bias_lin=b_lin))
+        b.add_landmark_factor((b.key, fac.L(j)), partial(
+            fac.landmark_factor, b.key, fac.L(j), x, R_ahrs, which, Rn, n_v=ekf.n_v, yaw_bias=ekf.yaw_bias,
+            i_yaw=ekf.i_yaw, orientation_innovation=ekf.orientation_innovation, huber_k=ekf.huber_k,
+            what=f"detection {x.index} at {t!r} s ({x.label})", yaw_bias_lin=b_lin), robust=ekf.huber_k is not None)

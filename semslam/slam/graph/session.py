@@ -58,23 +58,23 @@ class GraphSession(SlamSession):
         self._hist_keys: list[int] = []
         self._wall = 0.0
 
-    # ------------------------------------------------------------------ set-up
-    def _start(self, stamp_s: float) -> None:
-        surveyed, self._surveyed = self._surveyed, []
-        super()._start(stamp_s)
-        ekf = self.ekf
-        ekf.__class__ = FrontEkf  # the same filter, mirroring its operations into the graph
-        ekf.recorder = None  # the graph is the smoother
+    # ------------------------------------------------------------------ set-up (SlamSession's factory hooks)
+    def _make_filter(self, x0_position, v0_body, P0, **kw) -> FrontEkf:
+        """The front-end filter: the same EKF, mirroring its operations into the graph."""
+        ekf = FrontEkf(x0_position, v0_body, P0, **kw)
         ekf.huber_k, ekf.orientation_innovation = self.huber_k, self.cfg.gating.orientation_innovation
         ekf.backend = self.graph = GraphBackend(self.backend_name, ekf.n_v)
+        return ekf
+
+    def _make_recorder(self) -> None:
+        return None  # the graph is the smoother
+
+    def _filter_ready(self, ekf: FrontEkf) -> None:
         self.graph.start(self.t, ekf.xa[:ekf.n_v].copy(), ekf.Paa[:ekf.n_v, :ekf.n_v].copy())
-        self.mapper.__class__ = GraphMapper
-        self.mapper.records = self.log
-        self._surveyed = surveyed
-        if surveyed:
-            names, labels, poses = zip(*surveyed)
-            self.mapper.add_surveyed(self._t0, names, labels, poses, self.cfg.initialisation.survey_position_sigma_m,
-                                     self.cfg.initialisation.survey_rotation_sigma_rad)
+
+    def _make_mapper(self, ekf: FrontEkf) -> GraphMapper:
+        return GraphMapper(ekf, self.cfg, self.mode, self.symmetries, self.vehicle.T_vehicle_scanner, self._log,
+                           records=self.log)
 
     # ------------------------------------------------------------------ messages
     def add_detections(self, stamp_s, detections) -> None:
@@ -161,7 +161,7 @@ class GraphSession(SlamSession):
         metrics = dict(base.metrics, backend=self.backend_name,
                        graph={"backend": self.backend_name, "n_keyframes": len(g.kf_t), "n_factors": g.n_factors,
                               "n_landmarks": g.n_landmarks, "n_updates": int(len(g.update_s)),
-                              "batch_iterations": g.iterations,
+                              "batch_iterations": g.iterations, "detection_factors_relinearized": g.n_relinearized,
                               "update_mean_s": float(ups.mean()), "update_max_s": float(ups.max()),
                               "wall_s": self._wall, "real_time_factor": dur / self._wall if self._wall > 0 else float("inf"),
                               "huber_k": self.huber_k})
