@@ -443,7 +443,7 @@ def test_feature_registration_flags_a_half_turn_it_cannot_rule_out():
     for fa, fb in (("1", "1"), ("1", "2"), ("2", "1"), ("2", "2")):
         a = views[("ball_valve", "pitch000_yaw000_30cm", fa)]
         b = views[("ball_valve", "pitch000_yaw030_30cm", fb)]
-        res = register(a["cloud"], b["cloud"], RegisterConfig(time_budget_s=10), seed=0)
+        res = register(a["cloud"], b["cloud"], RegisterConfig(time_budget_s=None), seed=0)  # cold numba: no budget
         assert {"reliable", "ambiguous", "flip_alternatives"} <= set(res.extras)
         assert len(res.extras["flip_alternatives"]) == 3
         err = real_valves.angle_deg(np.asarray(res.T_target_source.matrix)[:3, :3].T
