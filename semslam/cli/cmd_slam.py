@@ -36,7 +36,9 @@ def register(subparsers, common) -> None:
     p.set_defaults(func=run)
 
     q = subparsers.add_parser("montecarlo", parents=[common], help="seeded Monte-Carlo evaluation of the filter modes",
-                              description="Simulate N seeded missions, run each filter mode, report ATE and ANEES.")
+                              description="Simulate N seeded missions, run each filter mode, report ATE and ANEES "
+                                          "(summary.json/.md, ANEES and error-over-time curves, report.html; "
+                                          "`semslam report` of a folder of several backends' Monte Carlos compares them).")
     q.add_argument("--runs", type=int, default=30, help="number of missions (default 30)")
     q.add_argument("--mode", choices=MODE_CHOICES, default="all", help="mode to run (default all)")
     q.add_argument("--yaw-bias-deg", type=float, default=0.0, help="constant AHRS yaw bias of the missions (degrees)")
