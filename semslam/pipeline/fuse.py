@@ -94,7 +94,7 @@ def read_poses_csv(path: str | Path, view_ids: Sequence[str]) -> dict[str, np.nd
             raise DatabaseError(f"Line {lineno} of the poses file {where!r} (view {view!r}) holds NaN or infinity.")
         if view in poses:
             raise DatabaseError(f"The poses file {where!r} gives view {view!r} twice (line {lineno}).")
-        poses[view] = _pose_from_values(values, header is _QUAT_COLUMNS or header == _QUAT_COLUMNS,
+        poses[view] = _pose_from_values(values, header == _QUAT_COLUMNS,
                                         f"line {lineno} of the poses file {where!r} (view {view!r})")
     missing = [v for v in view_ids if v not in poses]
     if missing:
