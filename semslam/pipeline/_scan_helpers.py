@@ -1,16 +1,48 @@
-"""Helpers of :mod:`.scan`: numba versions of the scan's angular extent and of a cluster's input indices."""
+"""Helpers of :mod:`.scan`: the per-cluster outcome record, the hypothesis-verification rule, and numba versions of
+the scan's angular extent and of a cluster's input indices."""
 
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..cloud import PointCloud
+from ..detection import Detection
+from ..registration.pose import estimate_object_pose
 from ..recognition.plausibility import scan_angular_extent
 from ..segmentation.scene import SegmentationResult
 
-__all__: list[str] = []
+__all__ = ["ClusterOutcome"]
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterOutcome:
+    """What happened to one cluster: its size, the match, and the detection or why there is none.
+
+    ``distance`` is NaN and ``nearest_label`` empty when the cluster was rejected before matching (too
+    big for every class, or cut by the scan border); ``extent_m`` (3,) holds its principal extents,
+    largest first (metres).
+    """
+
+    cluster_index: int
+    n_points: int
+    label: str
+    nearest_label: str
+    distance: float
+    threshold: float
+    detection: Detection | None
+    reason: str
+    touches_border: bool = False
+    extent_m: tuple = (0.0, 0.0, 0.0)
+
+    def to_dict(self) -> dict:
+        return {"cluster_index": self.cluster_index, "n_points": self.n_points, "label": self.label,
+                "nearest_label": self.nearest_label, "distance": self.distance, "threshold": self.threshold,
+                "detected": self.detection is not None, "reason": self.reason,
+                "touches_border": self.touches_border, "extent_m": [float(e) for e in self.extent_m]}
 
 
 def _valid_points(scan: PointCloud, drop_origin: bool) -> np.ndarray:
@@ -45,3 +77,57 @@ def _input_indices(seg: SegmentationResult, k: int) -> np.ndarray:
     idx = selected_input_indices(np.asarray(seg.cluster_indices[k], dtype=np.int64), seg.segmented_cloud.n_points,
                                  np.asarray(seg.point_voxel, dtype=np.int64))
     return idx if seg.kept_indices is None else seg.kept_indices[idx]
+
+
+def _verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None) -> str:
+    """Why a detection fails hypothesis verification (``PipelineConfig.verify_min_fitness`` /
+    ``verify_max_visibility``), or ``""`` when it passes (or verification is off). The visibility cost is tested
+    only when the pose search measured it (grid search; NaN otherwise)."""
+    if min_fitness is not None and not det.fitness >= min_fitness:
+        return f"pose verification: fitness {det.fitness:.3f} < {min_fitness:g}"
+    vis = float(det.extras.get("pose_visibility", float("nan")))
+    if max_visibility is not None and vis == vis and vis > max_visibility:
+        return f"pose verification: visibility cost {vis:.3f} > {max_visibility:g}"
+    return ""
+
+
+def _detect_cluster(rec: Any, scan: PointCloud, raw_idx: np.ndarray, cluster: PointCloud, label: str, view_index: int,
+                    match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict,
+                    touches_border: bool = False) -> Detection:
+    """The detection of one recognised cluster of ``rec`` (a :class:`~.scan.ScanRecognizer`): its pose (unless
+    ``estimate_pose`` is off), covariance and reliability; ``timings["pose"]`` accumulates the pose time."""
+    from ..geometry import RigidTransform
+
+    extras = {"view_index": int(view_index), "view_id": str(rec.db.view_ids[view_index]),
+              "cluster_points": len(raw_idx), "touches_border": bool(touches_border)}
+    if not rec.config.estimate_pose:
+        centroid = cluster.points_xyz_m.mean(axis=0)
+        return Detection(label, match.distance, RigidTransform.from_rotation_translation(np.eye(3), centroid),
+                         np.diag([1e-2] * 3 + [1e4] * 3), n_points=cluster.n_points, reliable=False,
+                         stamp_s=stamp_s, scan_id=scan_id, extras=extras)
+    t0 = time.perf_counter()
+    info = rec.db.class_info(label)
+    model = rec.pose_model(label, view_index)
+    points = scan.points_xyz_m[raw_idx] if len(raw_idx) else cluster.points_xyz_m
+    up_object = (rec.db.params.get("fusion") or {}).get(label, {}).get("up_object") \
+        if rec.config.up_scanner is not None else None
+    extras["pose_upright"] = up_object is not None
+    pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=rec.config.pose, seed=seed,
+                                viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=rec.config.up_scanner if up_object
+                                is not None else None, up_object=up_object)
+    timings["pose"] += (time.perf_counter() - t0) * 1e3
+    cov = pose.covariance_6x6
+    ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
+    extras["pose_visibility"] = float(pose.visibility)
+    extras["pose_score_margin"] = float(pose.score_margin)
+    if ambiguous:
+        # The cluster is well aligned but another, non-equivalent orientation fits almost as well (a
+        # near-symmetric view): the position is trustworthy, the orientation is not. Say so in the
+        # covariance instead of dropping the detection; the filter's cascade then uses the position.
+        cov = cov.copy()
+        cov[3:, 3:] += np.eye(3) * rec.config.ambiguous_rotation_variance_rad2
+        extras["orientation_ambiguous"] = True
+    return Detection(label, match.distance, pose.T_scanner_object, cov, score_kind="chi2",
+                     fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=len(points),
+                     reliable=bool((pose.reliable or ambiguous) and not touches_border),
+                     stamp_s=stamp_s, scan_id=scan_id, extras=extras)
