@@ -1,0 +1,477 @@
+"""Mutation score of the SLAM core (``semslam/slam/``, ``slam/graph/``) and of the numba descriptor kernels.
+
+Not run in CI: a benchmark (issue 20, item 2). The tool is **cosmic-ray** (``pip install -e .[mutation]``):
+it rewrites one module on disk per mutant and runs a test command, so it mutates numba ``@njit`` kernels like any
+other code (mutmut 3 skips every decorated function, i.e. every kernel, and its trampolines cannot run inside
+nopython code). Everything happens on a snapshot of the work tree (``--workdir``, default
+``/tmp/semslam-mutation``): the repository itself is never rewritten.
+
+For each module, the test command runs only a targeted subset of tests (``MODULE_TESTS`` below, plus any
+``tests/test_mutants_<module>*.py``, and ``tests/test_mutants_graph*.py`` for ``slam/graph/``), with
+``pytest -x``, under a per-mutant timeout of ``max(20 s, 3 x baseline + 10 s)`` where the baseline is the same
+command on the unmutated snapshot (which must pass, or the module is refused). Numba: every test process gets ``NUMBA_CACHE_DIR`` = a cache warmed on the unmutated snapshot; when
+the mutated module is a kernel module (it contains ``@njit``), the test process gets a private copy of that cache
+with the mutated module's entries deleted, so the mutant is really compiled by numba (the JIT is kept: the
+kernels' tests are 10-100x too slow under ``NUMBA_DISABLE_JIT=1``, and pure Python is not the code that ships:
+integer wrap-around, typing and bounds differ).
+
+Operators (one replacement per site, as mutmut does, to keep the count tractable): ``+ -> -``, ``- -> +``,
+``* -> /``, ``/ -> *``, ``// -> /``, ``% -> /``, ``** -> *``, ``<< -> >>``, ``>> -> <<``, ``& -> |``, ``| -> &``,
+``^ -> &``; comparisons ``== <-> !=``, ``is <-> is not``, ``< -> <=``, ``<= -> <``, ``> -> >=``, ``>= -> >``;
+``-x -> +x``, ``not x -> x``, ``x -> not x`` (conditions), ``True <-> False``, ``and <-> or``, ``break <->
+continue``, ``for`` loops iterating zero times, number ``n -> n + 1``, ``except E -> except <never raised>``.
+Mutants inside annotations are not run: every module has ``from __future__ import annotations``, so annotations
+are never evaluated (they are reported in the ``annot.`` column, not in the score).
+
+Equivalent mutants are listed by hand in ``benchmarks/mutation_equivalents.toml`` (module, line, operator,
+optional column, reason) and excluded from the denominator. Score = (killed + timeout) / (mutants - equivalent).
+
+Usage (2 cores shared: one test process at a time, niced)::
+
+    nice -n 10 .venv/bin/python benchmarks/mutation.py --part slam        # semslam/slam/ and slam/graph/
+    nice -n 10 .venv/bin/python benchmarks/mutation.py --part kernels     # descriptor kernels
+    nice -n 10 .venv/bin/python benchmarks/mutation.py --modules semslam/slam/ekf.py --max-per-module 80
+    .venv/bin/python benchmarks/mutation.py --report                      # table of what has been run so far
+    .venv/bin/python benchmarks/mutation.py --survivors semslam/slam/ekf.py   # diffs of the survivors
+
+Sessions are resumable (``cosmic-ray exec`` runs only pending mutants); ``--fresh`` starts over. With
+``--max-per-module N``, a module with more mutants runs a seeded random sample of N (``--seed``), and the table
+says so (``sampled/total``): the score is then an estimate, given with its 95 % Wilson interval.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import math
+import os
+import random
+import shutil
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+EQUIVALENTS = ROOT / "benchmarks" / "mutation_equivalents.toml"
+
+SLAM_MODULES = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "semslam" / "slam").rglob("*.py")
+                      if p.name != "__init__.py")
+KERNEL_MODULES = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "semslam" / "descriptors").glob("_*.py")
+                        if p.name != "__init__.py")
+
+_EKF = ["test_oracle_ekf.py", "test_slam_ekf.py", "test_oracle_smoother.py", "test_oracle_association.py",
+        "test_oracle_symmetry.py", "test_oracle_metrics.py"]
+# module -> the tests that exercise it directly (fast: seconds, not the whole suite)
+MODULE_TESTS: dict[str, list[str]] = {
+    "semslam/slam/_ekf_kernels.py": _EKF,
+    "semslam/slam/ekf.py": _EKF + ["test_bad_inputs_slam.py"],
+    "semslam/slam/compressed.py": ["test_oracle_ekf.py", "test_slam_ekf.py", "test_oracle_smoother.py"],
+    "semslam/slam/association.py": ["test_oracle_association.py", "test_oracle_symmetry.py",
+                                    "test_oracle_metrics.py", "test_slam_ekf.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/consensus.py": ["test_oracle_symmetry.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/metrics.py": ["test_oracle_metrics.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/smoother.py": ["test_oracle_smoother.py", "test_slam_smoother.py"],
+    "semslam/slam/evaluation.py": ["test_evaluation.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/config.py": ["test_bad_inputs_slam.py", "test_slam_runner.py"],
+    "semslam/slam/detections.py": ["test_bad_inputs_slam.py", "test_slam_runner.py"],
+    "semslam/slam/motion_noise.py": ["test_dvl_outage.py", "test_slam_realism.py"],
+    "semslam/slam/sensors.py": ["test_slam_realism.py", "test_dvl_outage.py", "test_slam_runner.py"],
+    "semslam/slam/session.py": ["test_slam_runner.py", "test_bad_inputs_slam.py", "test_dvl_outage.py"],
+    "semslam/slam/runner.py": ["test_slam_runner.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/mapping.py": ["test_slam_runner.py", "test_export.py"],
+    "semslam/slam/results.py": ["test_slam_runner.py", "test_export.py"],
+    "semslam/slam/rundir.py": ["test_slam_runner.py", "test_export.py", "test_bag_dataset.py"],
+    "semslam/slam/export.py": ["test_export.py"],
+    "semslam/slam/export_mcap.py": ["test_export.py"],
+    "semslam/slam/graph/backend.py": ["test_graph_backend.py", "test_graph_factors.py", "test_graph_robust.py"],
+    "semslam/slam/graph/factors.py": ["test_graph_factors.py", "test_graph_robust.py"],
+    "semslam/slam/graph/frontend.py": ["test_graph_backend.py", "test_graph_robust.py"],
+    "semslam/slam/graph/segment.py": ["test_graph_backend.py", "test_graph_robust.py"],
+    "semslam/slam/graph/session.py": ["test_graph_backend.py", "test_graph_robust.py"],
+    "semslam/descriptors/_esf_kernels.py": ["test_esf.py"],
+    "semslam/descriptors/_fpfh_kernels.py": ["test_fpfh.py", "test_fpfh_bounded.py"],
+    "semslam/descriptors/_neighbors_kernels.py": ["test_neighbors.py", "test_fpfh_bounded.py"],
+    "semslam/descriptors/_normals_kernels.py": ["test_normals.py"],
+    "semslam/descriptors/_pair_kernels.py": ["test_fpfh.py", "test_vfh.py"],
+}
+
+OPERATORS = {
+    "core/ReplaceBinaryOperator_Add_Sub", "core/ReplaceBinaryOperator_Sub_Add",
+    "core/ReplaceBinaryOperator_Mul_Div", "core/ReplaceBinaryOperator_Div_Mul",
+    "core/ReplaceBinaryOperator_FloorDiv_Div", "core/ReplaceBinaryOperator_Mod_Div",
+    "core/ReplaceBinaryOperator_Pow_Mul", "core/ReplaceBinaryOperator_LShift_RShift",
+    "core/ReplaceBinaryOperator_RShift_LShift", "core/ReplaceBinaryOperator_BitAnd_BitOr",
+    "core/ReplaceBinaryOperator_BitOr_BitAnd", "core/ReplaceBinaryOperator_BitXor_BitAnd",
+    "core/ReplaceComparisonOperator_Eq_NotEq", "core/ReplaceComparisonOperator_NotEq_Eq",
+    "core/ReplaceComparisonOperator_Is_IsNot", "core/ReplaceComparisonOperator_IsNot_Is",
+    "core/ReplaceComparisonOperator_Lt_LtE", "core/ReplaceComparisonOperator_LtE_Lt",
+    "core/ReplaceComparisonOperator_Gt_GtE", "core/ReplaceComparisonOperator_GtE_Gt",
+    "core/ReplaceUnaryOperator_USub_UAdd", "core/ReplaceUnaryOperator_Delete_Not", "core/AddNot",
+    "core/ReplaceTrueWithFalse", "core/ReplaceFalseWithTrue", "core/ReplaceAndWithOr", "core/ReplaceOrWithAnd",
+    "core/ReplaceBreakWithContinue", "core/ReplaceContinueWithBreak", "core/ZeroIterationForLoop",
+    "core/NumberReplacer", "core/ExceptionReplacer",
+}
+
+SKIP_OPERATOR = "operator not in the set"
+SKIP_ANNOTATION = "inside an annotation (never evaluated)"
+SKIP_NUMBER_MINUS = "NumberReplacer n - 1 (only n + 1 is run)"
+SKIP_SAMPLE = "not in the sample"
+
+
+def _short(module: str) -> str:
+    return module.removeprefix("semslam/")
+
+
+def _stem(module: str) -> str:
+    return Path(module).stem.lstrip("_")
+
+
+def _tests_for(module: str, tree: Path) -> list[str]:
+    files = list(MODULE_TESTS.get(module, []))
+    files += sorted(p.name for p in (tree / "tests").glob(f"test_mutants_{_stem(module)}*.py"))
+    if Path(module).parent.name == "graph":   # tests/test_mutants_graph*.py: the graph subpackage's
+        files += sorted(p.name for p in (tree / "tests").glob("test_mutants_graph*.py"))
+    if not files:
+        raise SystemExit(f"mutation: no tests mapped for {module} (add it to MODULE_TESTS)")
+    return [f"tests/{f}" for f in dict.fromkeys(files)]
+
+
+def _is_kernel(path: Path) -> bool:
+    return "@njit" in path.read_text()
+
+
+# -------------------------------------------------------------------------------------------- snapshot
+def snapshot(workdir: Path, fresh: bool) -> Path:
+    """Copy semslam/, tests/ and pyproject.toml to ``workdir/tree`` (once; ``--fresh`` redoes it)."""
+    tree = workdir / "tree"
+    if fresh and workdir.exists():
+        shutil.rmtree(workdir)
+    if not tree.exists():
+        ignore = shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "*.pyc")
+        tree.mkdir(parents=True)
+        shutil.copytree(ROOT / "semslam", tree / "semslam", ignore=ignore)
+        shutil.copytree(ROOT / "tests", tree / "tests", ignore=ignore)
+        shutil.copy2(ROOT / "pyproject.toml", tree / "pyproject.toml")
+    else:  # new or strengthened tests are picked up; the code under test stays the snapshot
+        for p in (ROOT / "tests").glob("test_*.py"):
+            if not (tree / "tests" / p.name).exists() or p.read_bytes() != (tree / "tests" / p.name).read_bytes():
+                shutil.copy2(p, tree / "tests" / p.name)
+    return tree
+
+
+# ------------------------------------------------------------------------------------ the test command
+def run_tests(module: str, tree: Path, workdir: Path, warm: bool = False) -> int:
+    """The per-mutant test command (``mutation.py _test``): a fresh numba cache for a mutated kernel module.
+    ``warm``: on the unmutated snapshot, fill the shared cache instead (every kernel compiled once)."""
+    env = dict(os.environ)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    env.setdefault("SEMSLAM_SHARED", str(ROOT.parent / "shared"))
+    base = workdir / "numba-cache"
+    private = None
+    if _is_kernel(tree / module) and not warm:
+        private = Path(tempfile.mkdtemp(prefix="numba-", dir=workdir))
+        if base.exists():
+            shutil.copytree(base, private, dirs_exist_ok=True)
+        prefix = Path(module).stem + "."
+        for p in private.rglob(prefix + "*"):
+            p.unlink()
+        env["NUMBA_CACHE_DIR"] = str(private)
+    else:
+        env["NUMBA_CACHE_DIR"] = str(base)
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "--no-header",
+           *_tests_for(module, tree)]
+    try:
+        return subprocess.call(cmd, cwd=tree, env=env)
+    finally:
+        if private is not None:
+            shutil.rmtree(private, ignore_errors=True)
+
+
+# ---------------------------------------------------------------------------------------- one session
+def _annotation_spans(path: Path) -> list[tuple[int, int, int, int]]:
+    tree = ast.parse(path.read_text())
+    if not any(isinstance(n, ast.ImportFrom) and n.module == "__future__"
+               and any(a.name == "annotations" for a in n.names) for n in tree.body):
+        return []
+    spans = []
+    for node in ast.walk(tree):
+        anns = []
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            anns.append(node.returns)
+            a = node.args
+            for arg in a.posonlyargs + a.args + a.kwonlyargs + [a.vararg, a.kwarg]:
+                if arg is not None:
+                    anns.append(arg.annotation)
+        elif isinstance(node, ast.AnnAssign):
+            anns.append(node.annotation)
+        for ann in anns:
+            if ann is not None:
+                spans.append((ann.lineno, ann.col_offset, ann.end_lineno, ann.end_col_offset))
+    return spans
+
+
+def _inside(row: int, col: int, spans) -> bool:
+    return any((r0, c0) <= (row, col) < (r1, c1) for r0, c0, r1, c1 in spans)
+
+
+def _session_paths(workdir: Path, module: str) -> tuple[Path, Path]:
+    name = module.replace("/", "__").removesuffix(".py")
+    return workdir / "sessions" / f"{name}.toml", workdir / "sessions" / f"{name}.sqlite"
+
+
+def _cosmic_ray() -> list[str]:
+    exe = Path(sys.executable).with_name("cosmic-ray")
+    if not exe.exists():
+        raise SystemExit("mutation: cosmic-ray is not installed (pip install -e '.[mutation]')")
+    return [str(exe)]
+
+
+def prepare(module: str, tree: Path, workdir: Path, max_per_module: int | None, seed: int) -> tuple[Path, Path]:
+    """Baseline, config and session (``cosmic-ray init``) for one module, with the skip marks."""
+    cfg, db = _session_paths(workdir, module)
+    cfg.parent.mkdir(parents=True, exist_ok=True)
+    if db.exists():
+        return cfg, db
+    # baseline on the unmutated snapshot: must pass; warms the shared numba cache
+    cmd = [sys.executable, str(Path(__file__).resolve()), "_test", module, "--workdir", str(workdir)]
+    subprocess.call(cmd + ["--warm"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)   # warm-up
+    t0 = time.monotonic()
+    rc = subprocess.call(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    baseline = time.monotonic() - t0
+    if rc != 0:
+        raise SystemExit(f"mutation: the tests of {module} fail on the unmutated code (rc {rc})")
+    timeout = max(20.0, 3.0 * baseline + 10.0)
+    cfg.write_text(
+        "[cosmic-ray]\n"
+        f"module-path = \"{tree / module}\"\n"
+        f"timeout = {timeout:.1f}\n"
+        "excluded-modules = []\n"
+        f"test-command = \"{sys.executable} {Path(__file__).resolve()} _test {module} --workdir {workdir}\"\n"
+        f"# baseline {baseline:.1f} s\n"
+        "[cosmic-ray.distributor]\nname = \"local\"\n")
+    subprocess.run(_cosmic_ray() + ["init", str(cfg), str(db)], check=True, stdout=subprocess.DEVNULL)
+    spans = _annotation_spans(tree / module)
+    con = sqlite3.connect(db)
+    rows = con.execute("SELECT job_id, operator_name, occurrence, start_pos_row, start_pos_col "
+                       "FROM mutation_specs").fetchall()
+    con.close()
+    skip: dict[str, str] = {}
+    for job, op, occ, row, col in rows:
+        if op not in OPERATORS:
+            skip[job] = SKIP_OPERATOR
+        elif _inside(row, col, spans):
+            skip[job] = SKIP_ANNOTATION
+        elif op == "core/NumberReplacer" and occ % 2 == 1:
+            skip[job] = SKIP_NUMBER_MINUS
+    # job ids are random UUIDs: order by position and operator, so that a seed picks the same mutants every time
+    eligible = [job for *_, job in sorted((row, col, op, occ, job) for job, op, occ, row, col in rows
+                                          if job not in skip)]
+    if max_per_module is not None and len(eligible) > max_per_module:
+        keep = set(random.Random(f"{seed}:{module}").sample(eligible, max_per_module))
+        for job in eligible:
+            if job not in keep:
+                skip[job] = SKIP_SAMPLE
+    from cosmic_ray.work_db import use_db
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
+    with use_db(str(db)) as wdb:
+        for why in set(skip.values()):
+            wdb.set_multiple_results([j for j, w in skip.items() if w == why],
+                                     WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output=why))
+    return cfg, db
+
+
+def execute(module: str, tree: Path, workdir: Path, max_per_module: int | None, seed: int,
+            rerun_survivors: bool = False) -> None:
+    cfg, db = prepare(module, tree, workdir, max_per_module, seed)
+    if rerun_survivors:   # after new tests: run the survivors again (the snapshot's tests were refreshed)
+        c = classify(module, workdir, load_equivalents())   # hand-checked equivalents are not run again
+        jobs = [job for job, *_ in c["survivor_jobs"]]
+        con = sqlite3.connect(db)
+        con.executemany("DELETE FROM work_results WHERE job_id = ?", [(j,) for j in jobs])
+        con.commit()
+        con.close()
+    t0 = time.monotonic()
+    subprocess.run(_cosmic_ray() + ["exec", str(cfg), str(db)], check=True, cwd=tree)
+    print(f"mutation: {module} done in {time.monotonic() - t0:.0f} s", flush=True)
+
+
+# ---------------------------------------------------------------------------------------------- report
+def load_equivalents() -> list[dict]:
+    if not EQUIVALENTS.exists():
+        return []
+    items = tomllib.loads(EQUIVALENTS.read_text()).get("equivalent", [])
+    for e in items:
+        if not e.get("reason"):
+            raise SystemExit(f"mutation: equivalent without a reason: {e}")
+    return items
+
+
+def _is_equivalent(module, op, row, col, equivalents) -> dict | None:
+    for e in equivalents:
+        if (e["module"] == module and e["line"] == row and e["operator"] == op
+                and e.get("col", col) == col):
+            return e
+    return None
+
+
+def classify(module: str, workdir: Path, equivalents: list[dict]) -> dict | None:
+    _, db = _session_paths(workdir, module)
+    if not db.exists():
+        return None
+    from cosmic_ray.work_db import WorkDB, use_db
+    with use_db(str(db), WorkDB.Mode.open) as wdb:
+        results = dict(wdb.results)
+        rows = []
+        for item in wdb.work_items:
+            (spec,) = item.mutations
+            r = results.get(item.job_id)
+            rows.append((item.job_id, spec.operator_name, spec.start_pos[0], spec.start_pos[1],
+                         None if r is None else r.worker_outcome.value,
+                         None if r is None or r.test_outcome is None else r.test_outcome.value,
+                         None if r is None else r.output, None if r is None else r.diff))
+    out = {"module": module, "total": 0, "killed": 0, "survived": 0, "timeout": 0, "equivalent": 0,
+           "pending": 0, "annotation": 0, "sampled_out": 0, "incompetent": 0, "survivors": [], "unused_eq": [],
+           "survivor_jobs": [], "wrong_eq": []}
+    used = set()
+    for job, op, row, col, wo, to, output, diff in rows:
+        if wo == "skipped":
+            if output == SKIP_ANNOTATION:
+                out["annotation"] += 1
+            elif output == SKIP_SAMPLE:
+                out["sampled_out"] += 1
+            continue
+        out["total"] += 1
+        eq = _is_equivalent(module, op, row, col, equivalents)
+        if eq is not None:
+            used.add(id(eq))
+        if eq is not None and to == "killed":   # a test tells it apart: not equivalent, the entry is wrong
+            out["killed"] += 1
+            out["wrong_eq"].append(eq)
+        elif eq is not None:
+            out["equivalent"] += 1
+        elif wo is None:
+            out["pending"] += 1
+        elif wo == "no-test":
+            out["killed"] += 1     # not applicable: should not happen with a fresh session
+        elif to == "killed" and (output or "").strip() == "timeout":
+            out["timeout"] += 1
+        elif to == "killed":
+            out["killed"] += 1
+        elif to == "incompetent" or wo == "exception":
+            out["incompetent"] += 1
+        else:
+            out["survived"] += 1
+            out["survivors"].append((row, col, op, diff))
+            out["survivor_jobs"].append((job, row, col, op))
+    out["unused_eq"] = [e for e in equivalents if e["module"] == module and id(e) not in used]
+    return out
+
+
+def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return (c - h, c + h)
+
+
+def report(modules: list[str], workdir: Path) -> str:
+    equivalents = load_equivalents()
+    head = ("| module | mutants | killed | survived | timeout | equiv. excluded | score | annot. | sample |\n"
+            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    lines = [head]
+    keys = ("total", "killed", "survived", "timeout", "equivalent", "pending", "annotation", "incompetent")
+    groups: dict[str, dict] = {}
+    for m in modules:
+        c = classify(m, workdir, equivalents)
+        if c is None:
+            lines.append(f"| {_short(m)} | not run | | | | | | | |")
+            continue
+        tot = groups.setdefault("slam/" if m.startswith("semslam/slam/") else "descriptor kernels",
+                                dict.fromkeys(keys, 0))
+        for k in keys:
+            tot[k] += c[k]
+        den = c["total"] - c["equivalent"] - c["pending"]
+        hit = c["killed"] + c["timeout"] + c["incompetent"]
+        score = f"{100 * hit / den:.1f} %" if den else "-"
+        sample = "all"
+        if c["sampled_out"]:
+            lo, hi = _wilson(hit, den)
+            sample = f"{c['total']}/{c['total'] + c['sampled_out']} ({100 * lo:.0f}-{100 * hi:.0f} %)"
+        pend = f" (+{c['pending']} pending)" if c["pending"] else ""
+        lines.append(f"| {_short(m)} | {c['total']}{pend} | {hit} | {c['survived']} | {c['timeout']} | "
+                     f"{c['equivalent']} | {score} | {c['annotation']} | {sample} |")
+        for e in c["unused_eq"]:
+            lines.append(f"|   (stale equivalent entry: line {e['line']} {e['operator']}) | | | | | | | | |")
+        for e in c["wrong_eq"]:
+            lines.append(f"|   (equivalent entry of a killed mutant: line {e['line']} {e['operator']}) "
+                         "| | | | | | | | |")
+    for name, t in groups.items():
+        den = t["total"] - t["equivalent"] - t["pending"]
+        hit = t["killed"] + t["timeout"] + t["incompetent"]
+        score = f"{100 * hit / den:.1f} %" if den else "-"
+        lines.append(f"| **{name}, all run** | {t['total']} | {hit} | {t['survived']} | {t['timeout']} | "
+                     f"{t['equivalent']} | **{score}** | {t['annotation']} | |")
+    return "\n".join(lines)
+
+
+def survivors(module: str, workdir: Path) -> str:
+    c = classify(module, workdir, load_equivalents())
+    if c is None:
+        return f"{module}: not run"
+    parts = []
+    for row, col, op, diff in sorted(c["survivors"]):
+        parts.append(f"### {module}:{row}:{col} {op}\n{diff}")
+    return "\n".join(parts) or f"{module}: no survivor"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["_test"]:
+        p = argparse.ArgumentParser(prog="mutation.py _test")
+        p.add_argument("module")
+        p.add_argument("--workdir", type=Path, required=True)
+        p.add_argument("--warm", action="store_true")
+        a = p.parse_args(argv[1:])
+        return run_tests(a.module, a.workdir / "tree", a.workdir, a.warm)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--part", choices=["slam", "kernels", "all"], default=None)
+    p.add_argument("--modules", nargs="*", default=None, help="module paths, e.g. semslam/slam/ekf.py")
+    p.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "semslam-mutation")
+    p.add_argument("--max-per-module", type=int, default=None, help="seeded random sample per module")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fresh", action="store_true", help="new snapshot and sessions")
+    p.add_argument("--report", action="store_true", help="only print the table")
+    p.add_argument("--rerun-survivors", action="store_true", help="run the surviving mutants again")
+    p.add_argument("--survivors", metavar="MODULE", help="print the surviving mutants' diffs")
+    a = p.parse_args(argv)
+    if a.survivors:
+        print(survivors(a.survivors, a.workdir))
+        return 0
+    part = a.part or ("all" if a.modules is None else None)
+    modules = list(a.modules or [])
+    if part in ("slam", "all"):
+        modules += SLAM_MODULES
+    if part in ("kernels", "all"):
+        modules += KERNEL_MODULES
+    modules = list(dict.fromkeys(modules))
+    if not a.report:
+        import cosmic_ray  # noqa: F401  (fail early when the extra is missing)
+        from importlib.metadata import version
+        print(f"mutation: cosmic-ray {version('cosmic-ray')}, python {sys.version.split()[0]}, "
+              f"{len(modules)} module(s), workdir {a.workdir}", flush=True)
+        tree = snapshot(a.workdir, a.fresh)
+        for m in modules:
+            execute(m, tree, a.workdir, a.max_per_module, a.seed, a.rerun_survivors)
+    print(report(modules, a.workdir))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,47 @@
+"""Tests that kill surviving mutants of ``semslam/slam/rundir.py`` (benchmarks/mutation.py)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from semslam.slam import SlamConfig
+from semslam.slam.results import SlamResult
+from semslam.slam.rundir import UPDATES, write_run
+
+
+def test_update_log_rows_are_written(tmp_path: Path):
+    """Catches an ``updates.csv`` that loses the update log (the loop over ``update_log`` skipped): every record is
+    one row in order, floats with 6 significant digits, unknown keys ignored, missing ones empty."""
+    k = 3
+    cov = np.tile(np.eye(3) * 1e-4, (k, 1, 1))
+    log = [dict(stamp_s=0.5, kind="dvl", accepted=True, nis=2.3456789, dof=3, threshold=21.1075, reason="nominal",
+                extra="ignored"),
+           dict(stamp_s=1.0, kind="landmark", accepted=False, test="pose", landmark=2, label="valve", detection=0)]
+    res = SlamResult(mode="pose", stamps_s=np.arange(k) * 0.5, position_ned_m=np.zeros((k, 3)), position_cov_m2=cov,
+                     velocity_body_mps=np.zeros((k, 3)), velocity_cov=cov.copy(), yaw_bias_rad=np.zeros(k),
+                     truth_position_ned_m=None, landmarks=[], update_log=log, metrics={}, config=SlamConfig(),
+                     attitude_rpy_rad=np.zeros((k, 3)))
+    out = write_run(res, tmp_path / "run")
+    rows = list(csv.DictReader((out / UPDATES).open()))
+    assert len(rows) == 2
+    assert rows[0]["kind"] == "dvl" and rows[0]["nis"] == "2.34568" and rows[0]["threshold"] == "21.1075"
+    assert rows[0]["accepted"] == "True" and rows[0]["reason"] == "nominal" and rows[0]["landmark"] == ""
+    assert "extra" not in rows[0]
+    assert rows[1]["kind"] == "landmark" and rows[1]["accepted"] == "False" and rows[1]["landmark"] == "2"
+
+
+def test_mode_dirs_lists_only_modes_with_a_trajectory(tmp_path: Path):
+    """Catches an inverted "has a trajectory" test in ``mode_dirs``: only the per-mode directories that hold a
+    trajectory file are runs ("pose+heading" lives in ``pose_heading``); an empty mode directory is not."""
+    from semslam.slam.rundir import TRAJECTORY, mode_dir, mode_dirs
+
+    for mode in ("pose", "pose+heading", "dr"):
+        mode_dir(tmp_path, mode).mkdir(parents=True)
+    for mode in ("pose", "pose+heading"):
+        (mode_dir(tmp_path, mode) / TRAJECTORY).write_text("t\n")
+    found = mode_dirs(tmp_path, ["dr", "pose", "pose+heading", "position"])
+    assert found == {"pose": mode_dir(tmp_path, "pose"), "pose+heading": mode_dir(tmp_path, "pose+heading")}
+    assert found["pose+heading"].name == "pose_heading"
