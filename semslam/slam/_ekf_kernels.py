@@ -60,16 +60,20 @@ def rot_z(angle: float) -> np.ndarray:
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) of a rotation matrix, angle in [0, pi]; robust near 0 and pi."""
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    th = float(np.arccos(c))
+    """Rotation vector (3,) of a rotation matrix, angle in [0, pi]; robust near 0 and pi.
+
+    The angle is ``atan2(|v| / 2, (trace - 1) / 2)`` (``v`` the skew part: ``2 sin(theta) u``), well conditioned
+    everywhere; near pi the axis comes from the *symmetric* part ``(R + R^T) / 2 - cos(theta) I =
+    (1 - cos(theta)) u u^T``, which the skew residue cannot contaminate (full precision up to pi)."""
+    c = (np.trace(R) - 1.0) / 2.0
     v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    th = float(np.arctan2(0.5 * np.linalg.norm(v), c))
     if th < 1e-6:
         return 0.5 * v
     if np.pi - th > 1e-4:
         return th / (2.0 * np.sin(th)) * v
     # near pi: axis from the symmetric part, sign from v
-    B = 0.5 * (R + np.eye(3))
+    B = 0.5 * (R + R.T) - c * np.eye(3)
     k = int(np.argmax(np.diag(B)))
     axis = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
     axis /= np.linalg.norm(axis)
