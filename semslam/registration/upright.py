@@ -98,11 +98,14 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _unit(name: str, value: Any, caller: str) -> np.ndarray:
+    """``value`` as a unit 3-vector; scaled by its largest entry first, so that 1e308 or 1e-300 entries (whose
+    norm overflows or underflows) still give their direction."""
     v = as_float_array(name, value, (3,), caller=caller)
-    n = float(np.linalg.norm(v))
-    if n < 1e-9:
+    m = float(np.abs(v).max())
+    if not m > 0.0:
         raise RegistrationError(f"The '{name}' argument of {caller} must be a non-zero 3-vector (up direction). Got {v.tolist()} instead.")
-    return v / n
+    v = v / m
+    return v / float(np.linalg.norm(v))
 
 
 def _thin(pts: np.ndarray, max_points: int) -> np.ndarray:
@@ -265,12 +268,7 @@ UPRIGHT_TILTS_DEG = (-6.0, 0.0, 6.0)
 def upright_rotations(up_scanner: Any, up_object: Any, *, caller: str = "upright_rotations") -> np.ndarray:
     """Rotations ``R`` of ``T_object_scanner`` (n, 3, 3) with ``R @ up_scanner`` near ``up_object``: every yaw
     about ``up_object`` at ``UPRIGHT_YAW_STEP_DEG``, each with the tilts of ``UPRIGHT_TILTS_DEG``."""
-    u_s = as_float_array("up_scanner", up_scanner, (3,), caller=caller)
-    u_o = as_float_array("up_object", up_object, (3,), caller=caller)
-    for name, u in (("up_scanner", u_s), ("up_object", u_o)):
-        if np.linalg.norm(u) < 1e-9:
-            raise RegistrationError(f"The '{name}' argument of {caller} must be a non-zero 3-vector. Got {u.tolist()} instead.")
-    u_s, u_o = u_s / np.linalg.norm(u_s), u_o / np.linalg.norm(u_o)
+    u_s, u_o = _unit("up_scanner", up_scanner, caller), _unit("up_object", up_object, caller)
     R0 = rotation_between(u_s, u_o)
     h1 = np.cross(u_o, [1.0, 0.0, 0.0] if abs(u_o[0]) < 0.9 else [0.0, 1.0, 0.0])
     h1 /= np.linalg.norm(h1)
