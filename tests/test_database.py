@@ -382,7 +382,7 @@ def test_crafted_database_files_are_refused_before_any_allocation(tmp_path):
     import json as _json
     import zipfile as _zip
 
-    from semslam.recognition import database as D
+    from semslam.recognition import storage as D
 
     npy = tmp_path / "views.npy"
     np.save(npy, np.zeros((3, 3)))

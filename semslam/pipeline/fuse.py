@@ -218,7 +218,7 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
     alignment is doubtful (under 30 % of their points within three
     point spacings of the other views). Keyword arguments go to :func:`~semslam.recognition.build_database`.
     """
-    from ..recognition.database import build_database, folder_classes, read_view_folder
+    from ..recognition.build import build_database, folder_classes, read_view_folder
 
     views, declared, meta_path = read_view_folder(views_dir, clean=clean)
     root = Path(views_dir)

@@ -8,19 +8,10 @@ leave-one-out evaluation and unknown-object rejection.
 ('ball_valve', 27, (4407, 3))
 """
 
-from .database import (
-    FORMAT_NAME,
-    FORMAT_VERSION,
-    ClassInfo,
-    ViewDatabase,
-    ViewDescriptors,
-    build_database,
-    build_database_from_folder,
-    combine_descriptors,
-    compute_view_descriptors,
-    load_database,
-    save_database,
-)
+from .build import build_database, build_database_from_folder
+from .database import FORMAT_NAME, FORMAT_VERSION, ClassInfo, ViewDatabase
+from .storage import load_database, save_database
+from .view_descriptors import ViewDescriptors, combine_descriptors, compute_view_descriptors
 from .evaluation import EvaluationResult, confusion_matrix, leave_one_out
 from .matching import Chi2NearestNeighbor, SvmClassifier, chi2_distances
 from .recognizer import Match, Recognizer

@@ -19,15 +19,10 @@ from typing import Any
 
 from ..errors import DatabaseError
 from .._cache import cache_dir
-from ..recognition.database import (
-    DEFAULT_NORMAL_RADIUS_M,
-    DEFAULT_VOXEL_LEAF_M,
-    FORMAT_VERSION,
-    ViewDatabase,
-    build_database,
-    load_database,
-    save_database,
-)
+from ..recognition.build import build_database
+from ..recognition.database import FORMAT_VERSION, ViewDatabase
+from ..recognition.storage import load_database, save_database
+from ..recognition.view_descriptors import DEFAULT_NORMAL_RADIUS_M, DEFAULT_VOXEL_LEAF_M
 
 __all__ = ["builtin_database", "cache_dir"]
 
