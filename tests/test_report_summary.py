@@ -7,7 +7,8 @@ import json
 
 import numpy as np
 
-from semslam.report.build import _section_heading_bias, _plt
+from semslam.report.build import _plt
+from semslam.report.slam_sections import _section_heading_bias
 from semslam.report.html import COLLAPSE_ROWS, _table_html
 from semslam.report.summary import human_label, key_results, summary_section
 
