@@ -63,7 +63,7 @@ class GraphSession(SlamSession):
         """The front-end filter: the same EKF, mirroring its operations into the graph."""
         ekf = FrontEkf(x0_position, v0_body, P0, **kw)
         ekf.huber_k, ekf.orientation_innovation = self.huber_k, self.cfg.gating.orientation_innovation
-        ekf.backend = self.graph = GraphBackend(self.backend_name, ekf.n_v)
+        ekf.backend = self.graph = GraphBackend(self.backend_name, ekf.n_v, bias_index=ekf.i_yaw)
         return ekf
 
     def _make_recorder(self) -> None:
