@@ -9,6 +9,7 @@ them when ``runs/demo`` has none)::
     .venv/bin/python benchmarks/latency.py --run runs/demo --repeat 3 --cold-scans 10 40
     .venv/bin/python benchmarks/latency.py --only warm --warm-up models     # the warm-up before issue #18
     .venv/bin/python benchmarks/latency.py --only cold
+    .venv/bin/python benchmarks/latency.py --only cold --cold-scans 1 10 15 17 25 --cold-repeat 5 --cold-cache empty
 
 Every figure is printed with the machine's load average (``os.getloadavg``): the latencies are only
 comparable at a similar load.
@@ -93,29 +94,56 @@ def warm(args) -> None:
 
 
 def cold(args) -> None:
+    """Fresh ``semslam recognize`` processes: process wall (and CPU: user + sys, which the machine's load inflates
+    less) best and median of ``--cold-repeat``, with the distance-field cache as it is (``--cold-cache warm``: one
+    unmeasured run fills it first) or empty (a new empty ``SEMSLAM_CACHE_DIR`` for every run)."""
+    import shutil
+    import tempfile
+
     run = Path(args.run)
     exe = str(Path(sys.executable).with_name("semslam"))
-    print(f"\n## Cold `semslam recognize SCAN --db {run / 'db.npz'} --json` (fresh process, best of {args.cold_repeat})\n")
+    print(f"\n## Cold `semslam recognize SCAN --db {run / 'db.npz'} --json` (fresh process, {args.cold_repeat} runs, "
+          f"distance-field cache {args.cold_cache})\n")
+    print("| scan | detections | load (first run) | wall best / median s | CPU best / median s | "
+          "load_db + recognize best / median ms | best run's timings_ms |")
+    print("|---|---|---|---:|---:|---:|---|")
     for sid in args.cold_scans:
         scan = run / "mission" / "scans" / f"scan_{sid:05d}.pcd"
-        best, all_ms = None, []
+        cmd = [exe, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"]
+        env = dict(os.environ)
+        if args.cold_cache == "warm":
+            subprocess.run(cmd, check=True, capture_output=True)
+        rows, load0 = [], _load()
         for _ in range(args.cold_repeat):
-            load0 = _load()
-            t0 = time.perf_counter()
-            out = subprocess.run([exe, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"], check=True,
-                                 capture_output=True, text=True)
-            wall = time.perf_counter() - t0
-            payload = json.loads(out.stdout)
+            empty = tempfile.mkdtemp(prefix="semslam_cold_") if args.cold_cache == "empty" else None
+            if empty:
+                env["SEMSLAM_CACHE_DIR"] = empty
+            try:
+                t0, cpu0 = time.perf_counter(), _children_cpu_s()
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+                wall, cpu = time.perf_counter() - t0, _children_cpu_s() - cpu0
+                out, err = proc.stdout, proc.stderr
+            finally:
+                if empty:
+                    shutil.rmtree(empty, ignore_errors=True)
+            if proc.returncode:
+                raise SystemExit(f"{' '.join(cmd)} failed: {err[-2000:]}")
+            payload = json.loads(out)
             t = payload["timings_ms"]
-            in_process = t["load_db"] + t["total"]
-            all_ms.append((in_process, wall))
-            if best is None or in_process < best[0]:
-                best = (in_process, wall, t, len(payload["detections"]), load0)
-        in_process, wall, t, n_det, load0 = best
-        med = np.median(np.array(all_ms), axis=0)
-        print(f"scan {sid} ({n_det} detections, {load0}): load_db + recognize best {in_process:.0f} ms (median "
-              f"{med[0]:.0f}), process wall {wall:.2f} s (median {med[1]:.2f}); best: "
-              + ", ".join(f"{k} {v:.0f}" for k, v in t.items()))
+            rows.append((wall, cpu, t["load_db"] + t["total"], t, len(payload["detections"])))
+        walls, cpus, inproc = (np.array([r[k] for r in rows]) for k in range(3))
+        best = rows[int(np.argmin(walls))]
+        print(f"| {sid} | {best[4]} | {load0} | {walls.min():.2f} / {np.median(walls):.2f} | "
+              f"{cpus.min():.2f} / {np.median(cpus):.2f} | {inproc.min():.0f} / {np.median(inproc):.0f} | "
+              + ", ".join(f"{k} {v:.0f}" for k, v in best[3].items()) + " |")
+
+
+def _children_cpu_s() -> float:
+    """CPU seconds (user + sys) of this process's finished children."""
+    import resource
+
+    u = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return u.ru_utime + u.ru_stime
 
 
 def main() -> None:
@@ -127,6 +155,8 @@ def main() -> None:
                     help="ScanRecognizer.warm_up (full) or only the pose models prepared (models: as before issue #18)")
     ap.add_argument("--cold-scans", type=int, nargs="+", default=[10])
     ap.add_argument("--cold-repeat", type=int, default=3)
+    ap.add_argument("--cold-cache", choices=("warm", "empty"), default="warm",
+                    help="the distance-field cache of the cold runs: filled by a first run, or empty for every run")
     args = ap.parse_args()
     if args.only in (None, "warm"):
         warm(args)

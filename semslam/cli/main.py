@@ -3,7 +3,9 @@
 Sub-commands are discovered: every module ``semslam/cli/cmd_*.py`` defines
 ``register(subparsers, common)`` and adds its parsers with ``parser.set_defaults(func=run)``, where
 ``run(args) -> int``. ``common`` is a parent parser carrying ``--json``, so that ``--json`` works both
-before the sub-command (global) and after it. Heavy imports belong inside ``run``.
+before the sub-command (global) and after it. Heavy imports belong inside ``run``. A command line naming a
+sub-command ``X`` defined by ``cmd_X.py`` builds only that module's parsers; help, errors and the commands of
+modules with another name (``montecarlo`` in ``cmd_slam.py``) build them all.
 
 Errors: a :class:`~semslam.errors.SemslamError` prints one line ``semslam: error: ...`` on stderr and
 exits 1; a usage error exits 2 (argparse); anything else is a bug and keeps its traceback.
@@ -12,6 +14,8 @@ exits 1; a usage error exits 2 (argparse); anything else is a bug and keeps its 
 from __future__ import annotations
 
 import argparse
+import atexit
+import gc
 import os
 import importlib
 import pkgutil
@@ -22,7 +26,21 @@ from .. import __version__
 from ..errors import SemslamError
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _command_modules() -> list[str]:
+    from . import __path__ as cli_path
+
+    return sorted(info.name for info in pkgutil.iter_modules(cli_path) if info.name.startswith("cmd_"))
+
+
+def _command_module(argv: Sequence[str]) -> str | None:
+    """``cmd_X`` when the sub-command in ``argv`` (its first argument that is not an option: the global options
+    take no value) is ``X`` and ``semslam/cli/cmd_X.py`` exists, else None."""
+    command = next((a for a in argv if not a.startswith("-")), None)
+    return f"cmd_{command}" if command is not None and f"cmd_{command}" in _command_modules() else None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``semslam`` parser with the sub-commands of every ``cmd_*`` module, or of the module ``only``."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
                         help="print machine-readable JSON instead of text")
@@ -35,17 +53,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--json", action="store_true", default=False,
                         help="print machine-readable JSON instead of text")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    from . import __path__ as cli_path
-
-    for info in sorted(pkgutil.iter_modules(cli_path), key=lambda m: m.name):
-        if info.name.startswith("cmd_"):
-            module = importlib.import_module(f"{__package__}.{info.name}")
-            module.register(sub, common)
+    for name in _command_modules():
+        if only in (None, name):
+            importlib.import_module(f"{__package__}.{name}").register(sub, common)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    # The interpreter's final garbage collections traverse every object still alive at exit (numba's typing
+    # registries and loaded kernels, scipy): ~0.25 s of a cold `semslam recognize`. gc.freeze at exit skips
+    # that work (the objects are not collected, the process ends); the atexit handlers registered before this
+    # one (logging, numba, weakref.finalize) still run after it. Registered once however often main() runs.
+    atexit.unregister(gc.freeze)
+    atexit.register(gc.freeze)
+    if argv is None:
+        argv = sys.argv[1:]
+    parser = build_parser(_command_module(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -2,10 +2,12 @@
 plus the measured point spacing that makes their settings scale-free.
 
 See /work/shared/design/pcl-algorithms.md for the PCL behaviour reproduced here.
+
+The FPFH (only the RANSAC registration uses it) is imported on first use (PEP 562): recognising a scan does not
+load its kernels.
 """
 
 from .esf import ESF_SIZE, compute_esf, glibc_rand
-from .fpfh import compute_fpfh, compute_spfh
 from .neighbors import Neighborhoods, find_neighbors
 from .normals import NormalsResult, estimate_normals
 from .spacing import point_spacing_m
@@ -26,3 +28,15 @@ __all__ = [
     "glibc_rand",
     "point_spacing_m",
 ]
+
+
+def __getattr__(name: str):
+    if name in ("compute_fpfh", "compute_spfh"):
+        from . import fpfh
+
+        return getattr(fpfh, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
