@@ -50,3 +50,22 @@ def test_cached_distance_field_equals_the_built_one(tmp_path, monkeypatch):
         assert np.array_equal(f.offsets, ref.offsets) and np.array_equal(f.index, ref.index)
         assert np.array_equal(f.params, ref.params) and f.truncation_m == ref.truncation_m
     assert len(list((tmp_path / "distance_field_v1").glob("*.npz"))) == 1
+
+
+def test_cached_view_centroids_equal_the_built_ones(tmp_path, monkeypatch):
+    """The translation starts read from the cache are the built ones, NaN (no facing sample) included."""
+    from semslam.registration.search import ViewCentroids
+
+    monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(tmp_path))
+    rng = np.random.default_rng(1)
+    nrm = rng.normal(size=(400, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    pts = 0.05 * nrm
+    nrm[:] = [0.0, 0.0, 1.0]  # every normal up: the downward directions see nothing (NaN centroids)
+    ref = ViewCentroids.build(pts, nrm, n_directions=64)
+    assert np.isnan(ref.centroids).any()
+    for _ in range(2):
+        v = ViewCentroids.build_cached(pts, nrm, n_directions=64)
+        assert np.array_equal(v.directions, ref.directions)
+        assert np.array_equal(v.centroids, ref.centroids, equal_nan=True)
+    assert len(list((tmp_path / "view_centroids_v1").glob("*.npz"))) == 1

@@ -12,7 +12,7 @@ import numpy as np
 from ..cloud import PointCloud
 from ..detection import Detection
 from ..registration.pose import estimate_object_pose
-from ..recognition.plausibility import scan_angular_extent
+from ..recognition.plausibility import max_plausible_extent_m, principal_extent, scan_angular_extent
 from ..segmentation.scene import SegmentationResult
 
 __all__ = ["ClusterOutcome"]
@@ -77,6 +77,30 @@ def _input_indices(seg: SegmentationResult, k: int) -> np.ndarray:
     idx = selected_input_indices(np.asarray(seg.cluster_indices[k], dtype=np.int64), seg.segmented_cloud.n_points,
                                  np.asarray(seg.point_voxel, dtype=np.int64))
     return idx if seg.kept_indices is None else seg.kept_indices[idx]
+
+
+def _class_size_limit_m(rec: Any, label: str) -> float:
+    """The size test's limit for class ``label`` of ``rec`` (a :class:`~.scan.ScanRecognizer`, cached in
+    ``rec._size_limits``): :func:`~semslam.recognition.plausibility.max_plausible_extent_m` of the class's longest
+    dimension: its bounding box's longest side, or with ``size_reference="principal"`` the larger of that and the
+    largest principal extent of its pose-model views fused in the object frame (at most the box's diagonal). The
+    clusters are measured along their principal axes: an L-shaped part (the butterfly valve: box 0.232 m,
+    principal 0.299 m) seen whole is longer that way than its box's longest side, and a box-side limit rejects
+    it."""
+    cached = rec._size_limits.get(label)
+    if cached is not None:
+        return cached
+    cfg = rec.config
+    size = np.asarray(rec.db.class_info(label).size_xyz_m, dtype=np.float64)
+    longest = float(size.max())
+    pts = [v.points_xyz_m for v in rec.db.pose_views(label) if v.n_points] if cfg.size_reference == "principal" \
+        else []
+    if pts:
+        fused = np.ascontiguousarray(np.vstack(pts), dtype=np.float64)
+        longest = max(longest, min(float(principal_extent(fused)[0]), float(np.linalg.norm(size))))
+    limit = max_plausible_extent_m(np.full(3, longest), tolerance=cfg.size_tolerance, slack_m=cfg.size_slack_m)
+    rec._size_limits[label] = limit
+    return limit
 
 
 def _verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None) -> str:

@@ -32,15 +32,13 @@ from ..recognition import (
     chi2_distances,
     combine_descriptors,
 )
-from ..recognition.plausibility import (
-    border_touched,
-    max_plausible_extent_m,
-    principal_extent,
-)
+from ..recognition.plausibility import border_touched, principal_extent
 from ..registration.pose import PoseConfig, PoseModel, estimate_object_pose, prepare_pose_model
 from ..segmentation.scene import SegmentationConfig, SegmentationResult, segment_scene
+from .parts import PartsConfig, merge_parts
 from ._scan_helpers import (
     ClusterOutcome,
+    _class_size_limit_m,
     _detect_cluster,
     _input_indices,
     _scan_angular_extent,
@@ -80,10 +78,17 @@ class PipelineConfig:
         while clutter is mostly rejected by the size test below.
     size_tolerance : float or None
         Size plausibility: a cluster whose largest principal extent exceeds ``size_tolerance`` times the
-        matched class's largest bounding-box dimension plus ``size_slack_m`` is rejected (floor and slope
+        matched class's longest dimension (see ``size_reference``) plus ``size_slack_m`` is rejected (floor and slope
         remains, rocks bigger than any fitting). Default 1.15; None disables the test.
     size_slack_m : float
         Default 0.01 m (two voxels: noise and floor points left around the object).
+    size_reference : {"box", "principal"}
+        The class's longest dimension for the size test: its bounding box's longest side (default), or the larger
+        of that and the largest principal extent of its fused pose-model views (``"principal"``): clusters are
+        measured along their principal axes, and an L-shaped part seen whole is longer that way than its box's
+        longest side (the catalogue's butterfly valve: 0.299 m against 0.232 m; the box rule rejected 3 of its 8
+        clusters). Not the default: on the built-in fittings it also lets more clutter through when nothing else
+        checks it (``benchmarks/recognition.py --only missions``: clutter false accepts 3 -> 9 of 55).
     border : {"reject", "flag", "keep"}
         Clusters within ``border_margin_rad`` of the scan footprint's edge are cut objects (their
         descriptor is unreliable: 85 % correct against 100 % for whole ones): ``"reject"`` (default) lists
@@ -119,6 +124,10 @@ class PipelineConfig:
         accepts 35 % -> 0 %, precision 47 % -> 99 % on the missions it was tuned on (held out: 40 % -> 5 %,
         37 % -> 82 %). The visibility cost counts occluded parts of the object as contradictions, so partly
         hidden objects are rejected too (benchmarks/RESULTS.md). Needs ``estimate_pose``.
+    parts : PartsConfig or None
+        Part-based hypotheses (:mod:`semslam.pipeline.parts`): unknown clusters close to each other are tried as
+        one object (a valve's handwheel seen apart from its body) and kept when the union is recognised, passes
+        verification and every part fits the pose. Off (None) by default; needs ``verify_min_fitness``.
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -129,6 +138,7 @@ class PipelineConfig:
     reject_margin: float = 6.0
     size_tolerance: float | None = 1.15
     size_slack_m: float = 0.01
+    size_reference: str = "box"
     border: str = "reject"
     border_margin_rad: float = float(np.radians(0.5))
     pose_model: str = "fused"
@@ -138,6 +148,7 @@ class PipelineConfig:
     up_scanner: tuple | None = None
     verify_min_fitness: float | None = None
     verify_max_visibility: float | None = None
+    parts: PartsConfig | None = None
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
@@ -151,6 +162,10 @@ class PipelineConfig:
         if not self.estimate_pose and (self.verify_min_fitness is not None or self.verify_max_visibility is not None):
             raise InputError(f"The 'verify_min_fitness' / 'verify_max_visibility' arguments of {c} need "
                              f"estimate_pose=True (they test the estimated pose). Got estimate_pose=False instead.")
+        if self.parts is not None and (not isinstance(self.parts, PartsConfig) or self.verify_min_fitness is None):
+            raise InputError(f"The 'parts' argument of {c} must be a PartsConfig, with verify_min_fitness set (a union "
+                             f"is kept only if its pose verifies). Got parts={self.parts!r}, "
+                             f"verify_min_fitness={self.verify_min_fitness!r} instead.")
         if self.up_scanner is not None:
             from .._validation import as_float_array
 
@@ -164,6 +179,7 @@ class PipelineConfig:
         check_choice("rejection", self.rejection, ("global", "per_class", "none"), caller=c)
         check_choice("pose_model", self.pose_model, POSE_MODELS, caller=c)
         check_choice("border", self.border, BORDER_POLICIES, caller=c)
+        check_choice("size_reference", self.size_reference, ("box", "principal"), caller=c)
         check_positive("reject_margin", self.reject_margin, caller=c)
         if self.size_tolerance is not None:
             check_positive("size_tolerance", self.size_tolerance, caller=c)
@@ -179,6 +195,7 @@ class PipelineConfig:
         d = asdict(self)
         d["segmentation"] = self.segmentation.to_dict()
         d["pose"] = self.pose.to_dict()
+        d["parts"] = None if self.parts is None else self.parts.to_dict()
         return d
 
     @classmethod
@@ -209,6 +226,8 @@ class PipelineConfig:
             d["segmentation"] = build(SegmentationConfig, d["segmentation"], f"the 'segmentation' table of {source}")
         if "pose" in d:
             d["pose"] = build(PoseConfig, d["pose"], f"the 'pose' table of {source}")
+        if d.get("parts") is not None:
+            d["parts"] = build(PartsConfig, d["parts"], f"the 'parts' table of {source}")
         return build(cls, d, source)
 
 
@@ -225,7 +244,7 @@ class RecognitionResult:
     segmentation : SegmentationResult
     timings_ms : dict
         Wall time per stage summed over clusters: ``segmentation``, ``descriptors``, ``matching``, ``pose``,
-        ``total`` (milliseconds).
+        ``total`` (milliseconds); ``parts`` with ``PipelineConfig.parts`` (its unions' poses count in ``pose`` too).
     """
 
     detections: list[Detection]
@@ -268,6 +287,7 @@ class ScanRecognizer:
             self.svm = SvmClassifier(seed=seed).fit(db.features(cfg.descriptor), db.labels)
         self._features = db.features(cfg.descriptor)
         self._pose_models: dict[Any, PoseModel] = {}
+        self._size_limits: dict[str, float] = {}
 
     # -- pose models, prepared once -----------------------------------------------------------------
     def pose_model(self, label: str, view_index: int) -> PoseModel:
@@ -287,8 +307,7 @@ class ScanRecognizer:
         cfg = self.config
         if cfg.size_tolerance is None:
             return float("inf")
-        return max(max_plausible_extent_m(self.db.class_info(c).size_xyz_m, tolerance=cfg.size_tolerance,
-                                          slack_m=cfg.size_slack_m) for c in self.db.classes)
+        return max(_class_size_limit_m(self, c) for c in self.db.classes)
 
     def warm_up(self) -> None:
         """Prepare every class's pose model now, recognise one database view and estimate the pose of one
@@ -398,8 +417,7 @@ class ScanRecognizer:
                                                **common))
                 continue
             if cfg.size_tolerance is not None:
-                limit = max_plausible_extent_m(self.db.class_info(label).size_xyz_m, tolerance=cfg.size_tolerance,
-                                               slack_m=cfg.size_slack_m)
+                limit = _class_size_limit_m(self, label)
                 if extent[0] > limit:
                     outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, match.nearest_label,
                                                    match.distance, match.threshold, None,
@@ -421,6 +439,9 @@ class ScanRecognizer:
                 reason += ", touches the scan border"
             outcomes.append(ClusterOutcome(k, cluster.n_points, label, match.nearest_label, match.distance,
                                            match.threshold, det, reason, **common))
+        if cfg.parts is not None:  # unknown clusters near each other tried as one object
+            merge_parts(self, scan, seg, outcomes, detections, seed=int(seeds[1]) + len(seg.clusters), stamps=stamps,
+                        stamp_s=stamp_s, scan_id=scan_id, timings=timings)
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return RecognitionResult(detections, outcomes, seg, timings)
 

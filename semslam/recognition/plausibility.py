@@ -2,7 +2,8 @@
 
 * **Size**: a cluster far bigger than the matched class cannot be that object (remains of the floor or the
   tank's slope, merged objects). :func:`cluster_extent_m` measures a cluster along its principal axes;
-  :func:`size_plausible` compares the largest of them with the class's bounding-box diagonal.
+  :func:`size_plausible` compares the largest of them with the class's longest bounding-box side (times a tolerance,
+  plus a slack: :func:`max_plausible_extent_m`).
 * **Scan border**: a cluster cut by the edge of the scan footprint is a partial object whose descriptor
   and pose are unreliable. :func:`scan_angular_extent` and :func:`touches_scan_border` work in the
   angular coordinates of a line scanner with its origin at the scan's viewpoint and z along the optical

@@ -34,8 +34,8 @@ from ._icp_kernels import icp_plane_field, icp_plane_field_batch
 from .icp import ICP_METHODS, IcpTarget, align_icp, prepare_icp_target
 from .result import RegistrationResult, _inlier_statistics_of_distances
 from .upright import upright_rotations
-from .search import (DistanceField, RadiusGrid, RangeImage, RotationHierarchy, rotation_distances, search_hypotheses,
-                     so3_grid)
+from .search import (DistanceField, RadiusGrid, RangeImage, RotationHierarchy, ViewCentroids, rotation_distances,
+                     search_hypotheses, so3_grid)
 
 _CALLER = "estimate_object_pose"
 
@@ -186,6 +186,9 @@ class PoseModel:
     radius_grid : RadiusGrid or None
         The ICP target points bucketed for exact nearest-neighbour queries within ``fit_tau_m`` and
         ``icp_max_correspondence_m`` (same results as ``icp_target.tree``, faster; None: the tree is used).
+    view_centroids : ViewCentroids or None
+        Centroid of the model surface facing each viewing direction: where the grid search starts the
+        translation (None: ``radius_m / 2`` from the origin towards the sensor).
     """
 
     points_object: np.ndarray
@@ -203,6 +206,7 @@ class PoseModel:
     radius_m: float = 0.05
     rotation_hierarchy: RotationHierarchy | None = field(default=None, repr=False)
     radius_grid: RadiusGrid | None = field(default=None, repr=False)
+    view_centroids: ViewCentroids | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,7 +276,6 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         then the views are concatenated). A bare array has normals oriented away from its centroid.
     config : PoseConfig, optional
     """
-    from ..descriptors import compute_fpfh
     from ..segmentation.voxel import voxel_downsample
 
     cfg = config or PoseConfig()
@@ -283,6 +286,8 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
     down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m)
     feats = ftree = None
     if cfg.coarse_method == "ransac":
+        from ..descriptors import compute_fpfh
+
         feats = compute_fpfh(down, nrm, radius_m=cfg.feature_radius_m)
         ftree = cKDTree(feats)
     icp_pts = voxel_downsample(pts, cfg.model_icp_voxel_m) if cfg.model_icp_voxel_m > 0 else pts
@@ -309,7 +314,8 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
                      visibility_points=np.ascontiguousarray(vis_pts), visibility_normals=np.ascontiguousarray(vis_nrm),
                      rotations=rotations, radius_m=float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1)))),
                      rotation_hierarchy=hierarchy,
-                     radius_grid=RadiusGrid.build(target.points_xyz_m, max(cfg.fit_tau_m, cfg.icp_max_correspondence_m)))
+                     radius_grid=RadiusGrid.build(target.points_xyz_m, max(cfg.fit_tau_m, cfg.icp_max_correspondence_m)),
+                     view_centroids=ViewCentroids.build_cached(vis_pts, vis_nrm) if len(vis_pts) else None)
 
 
 def _nearest(model: PoseModel, points: np.ndarray, bound_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -581,7 +587,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         object_radius_m=model.radius_m, symmetry=sym, image_cell_m=cfg.image_cell_m, tau_m=cfg.fit_tau_m,
         visibility_weight=cfg.visibility_weight, visibility_tol_m=cfg.visibility_tol_m, n_keep=cfg.n_refine,
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
-        n_coarse_keep=cfg.n_coarse_keep)
+        n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m
