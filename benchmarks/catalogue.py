@@ -18,7 +18,9 @@ along its principal axis than its bounding box's longest side);
 ``catalogue_tol3`` adds a 3 cm cluster tolerance (joins the ball valve's lever to its body: better at the default
 noise and at low density, but at 5 mm noise the floor's remains join the objects); ``catalogue_parts`` adds the
 part-based hypotheses (``PipelineConfig(parts=PartsConfig())``, :mod:`semslam.pipeline.parts`: unknown clusters
-near each other tried as one object, e.g. a gate valve's body and handwheel).
+near each other tried as one object, e.g. a gate valve's body and handwheel); ``catalogue_scene`` also checks
+the visibility cost against the whole scan about the cluster (``verify_visibility_image="scene"``: a model point
+behind another object is hidden, one outside the scan's footprint unknown).
 The other settings' headline numbers are printed too, on the same missions.
 
 Recall is counted per cluster (every cluster of a database object, including those cut by the scan border);
@@ -60,6 +62,8 @@ CONFIGS = {
                        "verify_max_visibility": 0.15, "border": "flag", "size_reference": "principal"},
     "catalogue_parts": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                         "size_reference": "principal", "parts": PartsConfig()},
+    "catalogue_scene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
+                        "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "scene"},
 }
 
 

@@ -109,17 +109,41 @@ def _verification_failure(det: Detection, min_fitness: float | None, max_visibil
     only when the pose search measured it (grid search; NaN otherwise)."""
     if min_fitness is not None and not det.fitness >= min_fitness:
         return f"pose verification: fitness {det.fitness:.3f} < {min_fitness:g}"
-    vis = float(det.extras.get("pose_visibility", float("nan")))
+    scene = "pose_visibility_scene" in det.extras
+    vis = float(det.extras.get("pose_visibility_scene" if scene else "pose_visibility", float("nan")))
     if max_visibility is not None and vis == vis and vis > max_visibility:
-        return f"pose verification: visibility cost {vis:.3f} > {max_visibility:g}"
+        return f"pose verification: {'scene ' if scene else ''}visibility cost {vis:.3f} > {max_visibility:g}"
     return ""
+
+
+def _scene_visibility(rec: Any, scan: PointCloud, seg: SegmentationResult | None, points: np.ndarray, model: Any,
+                      T_scanner_object: Any) -> float:
+    """The visibility cost of a pose against the whole scan about the cluster (``verify_visibility_image="scene"``,
+    :meth:`~semslam.registration.search.RangeImage.build_scene`): the segmented scan (planes included) for the free
+    space, its clusters as the only surfaces that may hide the object. NaN when the model has no visibility points."""
+    from ..registration.search import RangeImage
+
+    if model.visibility_points is None or not len(model.visibility_points):
+        return float("nan")
+    pc = rec.config.pose
+    if seg is None:  # no segmentation given: the raw scan, any surface may hide
+        image = RangeImage.build_scene(scan.points_xyz_m, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m)
+    else:
+        cloud = seg.segmented_cloud.points_xyz_m
+        objects = cloud[np.concatenate(seg.cluster_indices)] if seg.cluster_indices else cloud[:0]
+        image = RangeImage.build_scene(cloud, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m,
+                                       occluder_points=np.vstack([objects, points]))
+    T_os = np.linalg.inv(T_scanner_object.matrix)
+    return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
+                                       model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])
 
 
 def _detect_cluster(rec: Any, scan: PointCloud, raw_idx: np.ndarray, cluster: PointCloud, label: str, view_index: int,
                     match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict,
-                    touches_border: bool = False) -> Detection:
+                    touches_border: bool = False, seg: SegmentationResult | None = None) -> Detection:
     """The detection of one recognised cluster of ``rec`` (a :class:`~.scan.ScanRecognizer`): its pose (unless
-    ``estimate_pose`` is off), covariance and reliability; ``timings["pose"]`` accumulates the pose time."""
+    ``estimate_pose`` is off), covariance and reliability; ``timings["pose"]`` accumulates the pose time. ``seg``:
+    the scan's segmentation, for the scene visibility cost (``verify_visibility_image="scene"``)."""
     from ..geometry import RigidTransform
 
     extras = {"view_index": int(view_index), "view_id": str(rec.db.view_ids[view_index]),
@@ -143,6 +167,8 @@ def _detect_cluster(rec: Any, scan: PointCloud, raw_idx: np.ndarray, cluster: Po
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
     extras["pose_visibility"] = float(pose.visibility)
+    if rec.config.verify_visibility_image == "scene" and rec.config.verify_max_visibility is not None:
+        extras["pose_visibility_scene"] = _scene_visibility(rec, scan, seg, points, model, pose.T_scanner_object)
     extras["pose_score_margin"] = float(pose.score_margin)
     if ambiguous:
         # The cluster is well aligned but another, non-equivalent orientation fits almost as well (a

@@ -196,7 +196,7 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
         det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
         try:
             det = rec._detect(scan, raw_idx, cloud, label, view_index, match, det_stamp, scan_id, seed + u, timings,
-                              border)
+                              border, seg=seg)
         except RegistrationError:
             continue
         failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)

@@ -124,6 +124,12 @@ class PipelineConfig:
         accepts 35 % -> 0 %, precision 47 % -> 99 % on the missions it was tuned on (held out: 40 % -> 5 %,
         37 % -> 82 %). The visibility cost counts occluded parts of the object as contradictions, so partly
         hidden objects are rejected too (benchmarks/RESULTS.md). Needs ``estimate_pose``.
+    verify_visibility_image : {"cluster", "scene"}
+        What verification's visibility cost compares the model with: the cluster alone (default: every model
+        point the cluster did not see is a contradiction, so an object hidden in part or cut by the scan's edge
+        fails), or the whole scan about the cluster (``"scene"``: a model point behind another object is hidden, one
+        where the scanner did not look is unknown, and only one in front of what the scanner saw -- free space --
+        contradicts).
     parts : PartsConfig or None
         Part-based hypotheses (:mod:`semslam.pipeline.parts`): unknown clusters close to each other are tried as
         one object (a valve's handwheel seen apart from its body) and kept when the union is recognised, passes
@@ -148,6 +154,7 @@ class PipelineConfig:
     up_scanner: tuple | None = None
     verify_min_fitness: float | None = None
     verify_max_visibility: float | None = None
+    verify_visibility_image: str = "cluster"
     parts: PartsConfig | None = None
 
     def __post_init__(self) -> None:
@@ -180,6 +187,7 @@ class PipelineConfig:
         check_choice("pose_model", self.pose_model, POSE_MODELS, caller=c)
         check_choice("border", self.border, BORDER_POLICIES, caller=c)
         check_choice("size_reference", self.size_reference, ("box", "principal"), caller=c)
+        check_choice("verify_visibility_image", self.verify_visibility_image, ("cluster", "scene"), caller=c)
         check_positive("reject_margin", self.reject_margin, caller=c)
         if self.size_tolerance is not None:
             check_positive("size_tolerance", self.size_tolerance, caller=c)
@@ -427,7 +435,7 @@ class ScanRecognizer:
             raw_idx = _input_indices(seg, k)
             det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
             det = self._detect(scan, raw_idx, cluster, label, view_index, match, det_stamp, scan_id, cluster_seed,
-                               timings, border)
+                               timings, border, seg=seg)
             failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
             if failed:
                 outcomes.append(ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, match.nearest_label, match.distance,
@@ -447,9 +455,9 @@ class ScanRecognizer:
 
     def _detect(self, scan: PointCloud, raw_idx: np.ndarray, cluster: PointCloud, label: str, view_index: int,
                 match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict,
-                touches_border: bool = False) -> Detection:
+                touches_border: bool = False, seg: SegmentationResult | None = None) -> Detection:
         return _detect_cluster(self, scan, raw_idx, cluster, label, view_index, match, stamp_s, scan_id, seed, timings,
-                               touches_border)
+                               touches_border, seg=seg)
 
 
 def recognize_scan(scan: PointCloud, db: ViewDatabase, config: PipelineConfig | None = None, *,

@@ -144,7 +144,8 @@ def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz
 
 
 @njit(cache=True, parallel=True)
-def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m):
+def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m, unseen_bad,
+                    occluder_min):
     """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
 
     A model point (object frame) is mapped into the scanner frame by the inverse hypothesis; it is
@@ -152,7 +153,11 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     image (gnomonic, rows of ``F`` = image axes, z = mean ray; cell ``1 / inv_cell_uv``; ``range_min``
     (nu, nv) = smallest observed range around each cell, inf where nothing was observed). It contradicts
     the scan when its cell saw nothing (it should have been seen) or when it lies more than ``tol_m``
-    in front of the observed surface (free space).
+    in front of the observed surface (free space). With ``unseen_bad`` False (an image of the whole scene, not of
+    the cluster alone) a cell that saw nothing, or a point outside the image, is unknown: the point is not
+    counted at all (the scanner did not look there); a point more than ``tol_m`` behind the observed surface is
+    hidden if an object (``occluder_min``, same grid: the smallest range of the scene's objects, not its planes) is
+    in front of it, and contradicts the scan if only a plane is (the object would be inside the floor).
 
     Computed in the object frame: with ``c = t + R viewpoint`` (the scanner in the object frame) the ray is
     ``r = R^T (p_o - c)``, so the facing test is ``n_o . (p_o - c) < 0``, the range ``|p_o - c|`` and the
@@ -194,10 +199,22 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
             fi = np.floor((u - u0) * inv_cell_uv)
             fj = np.floor((v - v0) * inv_cell_uv)
             if not (fi >= 0.0 and fj >= 0.0 and fi < nu and fj < nv):  # (NaN-safe)
-                n_bad += 1
+                if unseen_bad:
+                    n_bad += 1
+                else:
+                    n_front -= 1
                 continue
             ro = range_min[int(fi), int(fj)]
-            if not np.isfinite(ro) or np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) < ro - tol_m:
+            if not np.isfinite(ro):
+                if unseen_bad:
+                    n_bad += 1
+                else:
+                    n_front -= 1
+                continue
+            d = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+            if d < ro - tol_m:
+                n_bad += 1
+            elif not unseen_bad and d > ro + tol_m and not occluder_min[int(fi), int(fj)] <= d + tol_m:
                 n_bad += 1
         out[h] = n_bad / max(n_front, 1)
     return out

@@ -156,6 +156,8 @@ class RangeImage:
     v0: float
     cell: float
     range_min: np.ndarray
+    #: :meth:`build_scene` with occluders: the smallest range of the scene's objects per cell (inf: none)
+    occluder_min: np.ndarray | None = None
 
     @classmethod
     def build(cls, points: np.ndarray, viewpoint: np.ndarray, *, cell_m: float, margin_m: float = 0.1,
@@ -184,11 +186,49 @@ class RangeImage:
         img = K.range_image(ij, rng, int(dims[0]), int(dims[1]), max(int(dilate), 0))
         return cls(np.asarray(viewpoint, dtype=np.float64), F, float(lo[0]), float(lo[1]), float(cell), img)
 
+    @classmethod
+    def build_scene(cls, scene_points: np.ndarray, viewpoint: np.ndarray, around_points: np.ndarray, *, cell_m: float,
+                    occluder_points: np.ndarray | None = None, margin_m: float = 0.3, dilate: int = 1) -> "RangeImage":
+        """The image of the whole scan in a cone about ``around_points`` (a cluster) widened by ``margin_m`` at the
+        cluster's median range: what the scanner saw where an object's model may lie, the other objects and the
+        free space included; outside the scan's footprint the cells stay unseen. ``occluder_points``: the scene's
+        objects (its clusters, not its planes), the only surfaces that may hide a model point (without them, any
+        surface may). For :meth:`visibility_cost` with ``unseen_is_contradiction=False``."""
+        vp = np.asarray(viewpoint, dtype=np.float64)
+        rays = np.asarray(around_points, dtype=np.float64) - vp
+        dist = np.linalg.norm(rays, axis=1)
+        z = rays.sum(axis=0)
+        z /= max(float(np.linalg.norm(z)), 1e-300)
+        cos_c = np.clip(rays @ z / np.maximum(dist, 1e-300), -1.0, 1.0)
+        half = float(np.arccos(cos_c.min())) + float(margin_m) / max(float(np.median(dist)), 1e-12)
+        scene = np.asarray(scene_points, dtype=np.float64)
+        sr = scene - vp
+        sd = np.linalg.norm(sr, axis=1)
+        inside = (sd > 0.0) & (sr @ z > np.cos(min(half, 0.5 * np.pi - 1e-3)) * sd)
+        pts = scene[inside] if inside.any() else np.asarray(around_points, dtype=np.float64)
+        img = cls.build(pts, vp, cell_m=cell_m, margin_m=0.0, dilate=dilate)
+        if occluder_points is None:
+            return img
+        occ = np.asarray(occluder_points, dtype=np.float64) - vp
+        q = occ @ img.F.T
+        front = q[:, 2] > 1e-9
+        uv = q[front, :2] / q[front, 2:3]
+        ij = np.floor((uv - [img.u0, img.v0]) / img.cell).astype(np.int64)
+        nu, nv = img.range_min.shape
+        ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < nu) & (ij[:, 1] < nv)
+        occ_img = K.range_image(ij[ok], np.linalg.norm(occ[front][ok], axis=1), int(nu), int(nv), max(int(dilate), 0))
+        return cls(img.viewpoint, img.F, img.u0, img.v0, img.cell, img.range_min, occ_img)
+
     def visibility_cost(self, Rs: np.ndarray, ts: np.ndarray, model_pts: np.ndarray, model_nrm: np.ndarray,
-                        tol_m: float) -> np.ndarray:
-        """Share (H,) of the model points predicted visible under each hypothesis that contradict the scan."""
+                        tol_m: float, *, unseen_is_contradiction: bool = True) -> np.ndarray:
+        """Share (H,) of the model points predicted visible under each hypothesis that contradict the scan. With
+        ``unseen_is_contradiction`` False (an image of the scene, :meth:`build_scene`), model points where the
+        scanner saw nothing are left out, and those behind what it saw are hidden (behind an object, when the image
+        has ``occluder_min``), not contradictions."""
         return K.visibility_cost(np.ascontiguousarray(Rs), np.ascontiguousarray(ts), model_pts, model_nrm,
-                                 self.viewpoint, self.F, self.u0, self.v0, 1.0 / self.cell, self.range_min, float(tol_m))
+                                 self.viewpoint, self.F, self.u0, self.v0, 1.0 / self.cell, self.range_min, float(tol_m),
+                                 bool(unseen_is_contradiction),
+                                 self.range_min if self.occluder_min is None else self.occluder_min)
 
 
 @dataclass(frozen=True, eq=False)
