@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from .._validation import check_int, check_positive
 from ..errors import DescriptorError, InputError, RegistrationError
-from ..recognition import UNKNOWN_LABEL, combine_descriptors
+from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import principal_extent
 from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _input_indices, _verification_failure
 
@@ -177,12 +177,7 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
             desc = rec.db.describe(cloud, seed=seed + u)
         except DescriptorError:
             continue
-        match = rec.recognizer.match_descriptors(desc)
-        label, view_index = match.label, match.view_index
-        if rec.svm is not None and match.accepted:
-            x = combine_descriptors(cfg.descriptor, desc.esf, desc.vfh)
-            label = str(rec.svm.predict(x)[0])
-            view_index = rec._nearest_view_of(label, x)
+        match, label, view_index = rec._classify(desc)
         if label == UNKNOWN_LABEL:
             _log.debug("union %s: unknown (nearest %s, distance %.3g > %.3g)", ks, match.nearest_label, match.distance,
                        match.threshold)

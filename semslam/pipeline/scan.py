@@ -409,12 +409,7 @@ class ScanRecognizer:
                                                f"rejected: no descriptor ({exc})", **common))
                 continue
             t1 = time.perf_counter()
-            match = self.recognizer.match_descriptors(desc)
-            label, view_index = match.label, match.view_index
-            if self.svm is not None and match.accepted:
-                x = combine_descriptors(cfg.descriptor, desc.esf, desc.vfh)
-                label = str(self.svm.predict(x)[0])
-                view_index = self._nearest_view_of(label, x)
+            match, label, view_index = self._classify(desc)
             t2 = time.perf_counter()
             timings["descriptors"] += (t1 - t0) * 1e3
             timings["matching"] += (t2 - t1) * 1e3
@@ -452,6 +447,16 @@ class ScanRecognizer:
                         stamp_s=stamp_s, scan_id=scan_id, timings=timings)
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return RecognitionResult(detections, outcomes, seg, timings)
+
+    def _classify(self, desc: Any) -> tuple[Any, str, int]:
+        """The nearest-view match of a cluster's descriptors, and its label and view (the SVM's, when it is used)."""
+        match = self.recognizer.match_descriptors(desc)
+        label, view_index = match.label, match.view_index
+        if self.svm is not None and match.accepted:
+            x = combine_descriptors(self.config.descriptor, desc.esf, desc.vfh)
+            label = str(self.svm.predict(x)[0])
+            view_index = self._nearest_view_of(label, x)
+        return match, label, view_index
 
     def _detect(self, scan: PointCloud, raw_idx: np.ndarray, cluster: PointCloud, label: str, view_index: int,
                 match: Any, stamp_s: float, scan_id: int, seed: int, timings: dict,
