@@ -92,7 +92,7 @@ def format_result(payload: dict) -> str:
         leaf = "none" if r["voxel_leaf_m"] is None else f"{1000 * r['voxel_leaf_m']:.2f} mm"
         lines.append(f"segmentation: point spacing {1000 * r['spacing_m']:.2f} mm -> voxel {leaf}, cluster "
                      f"tolerance {1000 * r['cluster_tolerance_m']:.2f} mm")
-    lines += [f"note: {n}" for n in seg.get("notes", [])]
+    lines += [f"note: {n}" for n in seg.get("notes", []) + payload.get("notes", [])]
     by_cluster = {c["cluster_index"]: c for c in payload["clusters"]}
     k = 0
     for c in payload["clusters"]:
@@ -178,6 +178,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         db = load_database(args.db)
     t_db = (time.perf_counter() - t0) * 1e3
+    notes = []
+    if config.up_scanner is not None:
+        fusion = db.params.get("fusion") or {}
+        no_up = [c for c in db.classes if not (fusion.get(c) or {}).get("up_object")]
+        if no_up:
+            notes.append(f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
+                         f"{'it' if len(no_up) == 1 else 'them'} (build it with 'semslam db build VIEWS --fuse --up X,Y,Z'); "
+                         "their pose search spans all orientations")
     scan = read_point_cloud(args.scene)
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)
     timings = {"load_db": t_db, **result.timings_ms}
@@ -185,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
                "descriptor": config.descriptor, "classifier": config.classifier,
                "detections": [d.to_dict() for d in result.detections],
                "clusters": [c.to_dict() for c in result.clusters], "timings_ms": timings,
-               "segmentation": result.segmentation.to_dict()}
+               "segmentation": result.segmentation.to_dict(), "notes": notes}
     if args.out:
         text = "".join(json.dumps(to_jsonable(d)) + "\n" for d in payload["detections"])
         atomic_write_text(args.out, text)
