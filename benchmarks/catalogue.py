@@ -64,6 +64,8 @@ CONFIGS = {
                         "size_reference": "principal", "parts": PartsConfig()},
     "catalogue_scene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                         "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "scene"},
+    "catalogue_border": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
+                         "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "border"},
 }
 
 

@@ -64,6 +64,7 @@ def test_a_half_outside_the_scan_footprint_is_unknown():
 
 def test_the_setting_is_checked():
     assert PipelineConfig(verify_visibility_image="scene").verify_visibility_image == "scene"
+    assert PipelineConfig(verify_visibility_image="border").verify_visibility_image == "border"
     with pytest.raises(InputError, match="verify_visibility_image"):
         PipelineConfig(verify_visibility_image="everything")
 

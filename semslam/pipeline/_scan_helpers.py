@@ -167,7 +167,8 @@ def _detect_cluster(rec: Any, scan: PointCloud, raw_idx: np.ndarray, cluster: Po
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
     extras["pose_visibility"] = float(pose.visibility)
-    if rec.config.verify_visibility_image == "scene" and rec.config.verify_max_visibility is not None:
+    mode = rec.config.verify_visibility_image
+    if rec.config.verify_max_visibility is not None and (mode == "scene" or (mode == "border" and touches_border)):
         extras["pose_visibility_scene"] = _scene_visibility(rec, scan, seg, points, model, pose.T_scanner_object)
     extras["pose_score_margin"] = float(pose.score_margin)
     if ambiguous:

@@ -124,12 +124,13 @@ class PipelineConfig:
         accepts 35 % -> 0 %, precision 47 % -> 99 % on the missions it was tuned on (held out: 40 % -> 5 %,
         37 % -> 82 %). The visibility cost counts occluded parts of the object as contradictions, so partly
         hidden objects are rejected too (benchmarks/RESULTS.md). Needs ``estimate_pose``.
-    verify_visibility_image : {"cluster", "scene"}
+    verify_visibility_image : {"cluster", "scene", "border"}
         What verification's visibility cost compares the model with: the cluster alone (default: every model
         point the cluster did not see is a contradiction, so an object hidden in part or cut by the scan's edge
         fails), or the whole scan about the cluster (``"scene"``: a model point behind another object is hidden, one
-        where the scanner did not look is unknown, and only one in front of what the scanner saw -- free space --
-        contradicts).
+        where the scanner did not look is unknown, one in front of what the scanner saw -- free space -- or behind a
+        plane contradicts); ``"border"``: the scene for the clusters cut by the scan border, the cluster for the
+        others.
     parts : PartsConfig or None
         Part-based hypotheses (:mod:`semslam.pipeline.parts`): unknown clusters close to each other are tried as
         one object (a valve's handwheel seen apart from its body) and kept when the union is recognised, passes
@@ -187,7 +188,7 @@ class PipelineConfig:
         check_choice("pose_model", self.pose_model, POSE_MODELS, caller=c)
         check_choice("border", self.border, BORDER_POLICIES, caller=c)
         check_choice("size_reference", self.size_reference, ("box", "principal"), caller=c)
-        check_choice("verify_visibility_image", self.verify_visibility_image, ("cluster", "scene"), caller=c)
+        check_choice("verify_visibility_image", self.verify_visibility_image, ("cluster", "scene", "border"), caller=c)
         check_positive("reject_margin", self.reject_margin, caller=c)
         if self.size_tolerance is not None:
             check_positive("size_tolerance", self.size_tolerance, caller=c)
