@@ -103,3 +103,21 @@ def test_up_without_a_recorded_up_direction_is_said_not_silently_ignored(scene, 
     assert len(notes) == 1 and notes[0].startswith("--up is not used for ball_valve, elbow, reducing_socket, reducing_tee")
     assert main(["recognize", str(scene), "--db", "builtin", "--no-pose"]) == 0
     assert "--up is not used" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("mode, expected", [("cluster", False), ("border", False), ("scene", True)])
+def test_the_scene_visibility_is_computed_for_the_clusters_its_mode_names(scene, cache, mode, expected):
+    """``verify_visibility_image``: "scene" checks every detection against the whole scan, "border" only those cut
+    by the scan border (the ball valve of this scan is whole), "cluster" none. Catches the mode ignored."""
+    from semslam.io import read_point_cloud
+    from semslam.pipeline import PipelineConfig, ScanRecognizer
+    from semslam.simulation.builtin_db import builtin_database
+
+    cfg = PipelineConfig(verify_min_fitness=0.5, verify_max_visibility=0.99, border="flag",
+                         verify_visibility_image=mode)
+    result = ScanRecognizer(builtin_database(seed=0), cfg).recognize(read_point_cloud(scene), seed=0)
+    (det,) = [d for d in result.detections if d.label == "ball_valve"]
+    assert not det.extras["touches_border"]
+    assert ("pose_visibility_scene" in det.extras) is expected
+    if expected:
+        assert 0.0 <= det.extras["pose_visibility_scene"] <= det.extras["pose_visibility"] + 1e-9
