@@ -6,8 +6,8 @@ other code (mutmut 3 skips every decorated function, i.e. every kernel, and its 
 nopython code). Everything happens on a snapshot of the work tree (``--workdir``, default
 ``/tmp/semslam-mutation``): the repository itself is never rewritten.
 
-For each module, the test command runs only a targeted subset of tests (``MODULE_TESTS`` below, plus any
-``tests/test_mutants_<module>*.py``, and ``tests/test_mutants_graph*.py`` for ``slam/graph/``), with
+For each module, the test command runs only a targeted subset of tests (any ``tests/test_mutants_<module>*.py``,
+and ``tests/test_mutants_graph*.py`` for ``slam/graph/``, first, then ``MODULE_TESTS`` below), with
 ``pytest -x``, under a per-mutant timeout of ``max(20 s, 3 x baseline + 10 s)`` where the baseline is the same
 command on the unmutated snapshot (which must pass, or the module is refused). Numba: every test process gets ``NUMBA_CACHE_DIR`` = a cache warmed on the unmutated snapshot; when
 the mutated module is a kernel module (it contains ``@njit``), the test process gets a private copy of that cache
@@ -36,13 +36,34 @@ Usage (2 cores shared: one test process at a time, niced)::
 
 Sessions are resumable (``cosmic-ray exec`` runs only pending mutants); ``--fresh`` starts over. With
 ``--max-per-module N``, a module with more mutants runs a seeded random sample of N (``--seed``), and the table
-says so (``sampled/total``): the score is then an estimate, given with its 95 % Wilson interval.
+says so (``sampled/total``): the score is then an estimate, given with its 95 % Wilson interval. A larger
+``--max-per-module`` on an existing session *extends* its sample: the mutants already run are kept and the new
+ones are the first of a seeded shuffle (``--seed``) of the rest, so the union is again a uniform random sample of
+the module's mutants (a simple random sample plus a simple random sample of the remainder); it is the sample a
+fresh session would draw only when the earlier sample size was the same.
+``--trim-pending`` ends an interrupted session: its pending mutants are put out of the sample. cosmic-ray runs
+pending mutants in random order, so those that were run are a random subsample of the seeded sample (a uniform
+random sample still, though not reproducible from the seed).
+
+Stale sessions: each session records the sha256 of the module it mutated. ``--refresh`` copies the current
+``semslam/`` (and tests) into the snapshot; a session whose module has changed since is then moved to
+``sessions/stale/`` when that module is run again (and started afresh on the new code), and the report marks a
+row whose results are from an older version of the module (``older code``). An existing session's baseline
+(its test command on the unmutated snapshot) is re-checked before pending mutants are run: the tests may have
+changed since the session was made.
+
+The report ends with an estimate for all of ``slam/`` that accounts for the stratified sample (the modules are
+the strata): each module's score weighted by its estimated number of non-equivalent mutants
+(``N_h (n_h - e_h) / n_h``: ``N_h`` mutants, ``n_h`` run, ``e_h`` of them equivalent), with a 95 % interval from
+MOVER (Zou & Donner 2008) on the per-module Wilson intervals (a module run in full has no sampling error; a
+sampled one a finite-population correction ``sqrt((N_h - n_h) / (N_h - 1))``).
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import hashlib
 import math
 import os
 import random
@@ -131,10 +152,12 @@ def _stem(module: str) -> str:
 
 
 def _tests_for(module: str, tree: Path) -> list[str]:
-    files = list(MODULE_TESTS.get(module, []))
-    files += sorted(p.name for p in (tree / "tests").glob(f"test_mutants_{_stem(module)}*.py"))
+    # the targeted tests first: a mutant that survived the module's other tests before they were written is then
+    # killed in seconds (``pytest -x``); the set of tests, hence killed or not, does not depend on the order
+    files = sorted(p.name for p in (tree / "tests").glob(f"test_mutants_{_stem(module)}*.py"))
     if Path(module).parent.name == "graph":   # tests/test_mutants_graph*.py: the graph subpackage's
         files += sorted(p.name for p in (tree / "tests").glob("test_mutants_graph*.py"))
+    files += list(MODULE_TESTS.get(module, []))
     if not files:
         raise SystemExit(f"mutation: no tests mapped for {module} (add it to MODULE_TESTS)")
     return [f"tests/{f}" for f in dict.fromkeys(files)]
@@ -145,16 +168,35 @@ def _is_kernel(path: Path) -> bool:
 
 
 # -------------------------------------------------------------------------------------------- snapshot
-def snapshot(workdir: Path, fresh: bool) -> Path:
-    """Copy semslam/, tests/ and pyproject.toml to ``workdir/tree`` (once; ``--fresh`` redoes it)."""
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else ""
+
+
+def _session_sha(cfg: Path) -> str | None:
+    for line in cfg.read_text().splitlines() if cfg.exists() else []:
+        if line.startswith("# module sha256 "):
+            return line.split()[-1]
+    return None
+
+
+def snapshot(workdir: Path, fresh: bool, refresh: bool = False) -> Path:
+    """Copy semslam/, tests/ and pyproject.toml to ``workdir/tree`` (once; ``--fresh`` redoes it; ``--refresh``
+    copies the current code over the snapshot, after recording in each session the hash of the code it ran on)."""
     tree = workdir / "tree"
     if fresh and workdir.exists():
         shutil.rmtree(workdir)
-    if not tree.exists():
+    if refresh and tree.exists():
+        for cfg in sorted((workdir / "sessions").glob("*.toml")):
+            if _session_sha(cfg) is None:   # a session made before hashes were recorded: the snapshot's code
+                module = _module_of(cfg)
+                if module is not None:
+                    cfg.write_text(cfg.read_text() + f"# module sha256 {_sha(tree / module)}\n")
+        shutil.rmtree(tree / "semslam")
+    if refresh or not tree.exists():
         ignore = shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "*.pyc")
-        tree.mkdir(parents=True)
+        tree.mkdir(parents=True, exist_ok=True)
         shutil.copytree(ROOT / "semslam", tree / "semslam", ignore=ignore)
-        shutil.copytree(ROOT / "tests", tree / "tests", ignore=ignore)
+        shutil.copytree(ROOT / "tests", tree / "tests", ignore=ignore, dirs_exist_ok=True)
         shutil.copy2(ROOT / "pyproject.toml", tree / "pyproject.toml")
     else:  # new or strengthened tests are picked up; the code under test stays the snapshot
         for p in (ROOT / "tests").glob("test_*.py"):
@@ -223,6 +265,66 @@ def _session_paths(workdir: Path, module: str) -> tuple[Path, Path]:
     return workdir / "sessions" / f"{name}.toml", workdir / "sessions" / f"{name}.sqlite"
 
 
+def _module_of(cfg: Path) -> str | None:
+    for m in SLAM_MODULES + KERNEL_MODULES:
+        if _session_paths(cfg.parent.parent, m)[0].name == cfg.name:
+            return m
+    return None
+
+
+def _baseline(module: str, workdir: Path, warm: bool = True) -> tuple[int, float]:
+    """The module's test command on the unmutated snapshot (after a warm-up that fills the numba cache; not when
+    re-checking an existing session, whose module's kernels are in the cache already)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "_test", module, "--workdir", str(workdir)]
+    if warm:
+        subprocess.call(cmd + ["--warm"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)   # warm-up
+    t0 = time.monotonic()
+    rc = subprocess.call(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return rc, time.monotonic() - t0
+
+
+def _sample_order(jobs: list[str], seed: int, module: str) -> list[str]:
+    """The order in which an existing session's sample is extended (seeded shuffle of the sorted jobs)."""
+    return random.Random(f"{seed}:{module}:extend").sample(jobs, len(jobs))
+
+
+def _eligible(db: Path) -> tuple[list[str], dict[str, tuple]]:
+    """Jobs that are not skipped for a reason other than the sample, sorted by position; their result rows."""
+    con = sqlite3.connect(db)
+    rows = con.execute("SELECT s.job_id, s.operator_name, s.occurrence, s.start_pos_row, s.start_pos_col, "
+                       "r.worker_outcome, r.output FROM mutation_specs s LEFT JOIN work_results r "
+                       "ON r.job_id = s.job_id").fetchall()
+    con.close()
+    keep = [(row, col, op, occ, job) for job, op, occ, row, col, wo, out in rows
+            if not (wo == "SKIPPED" and out != SKIP_SAMPLE)]
+    return [job for *_, job in sorted(keep)], {job: (wo, out) for job, _, _, _, _, wo, out in rows}
+
+
+def extend_sample(module: str, db: Path, max_per_module: int | None, seed: int) -> int:
+    """Grow an existing session's sample to ``max_per_module`` (None: every mutant): the mutants already in the
+    sample stay; new ones are drawn in :func:`_sample_order`. Returns how many were added (now pending)."""
+    eligible, res = _eligible(db)
+    out = [j for j in eligible if res[j] == ("SKIPPED", SKIP_SAMPLE)]
+    n_in = len(eligible) - len(out)
+    want = len(eligible) if max_per_module is None else min(max_per_module, len(eligible))
+    if want <= n_in:
+        return 0
+    add = [j for j in _sample_order(out, seed, module)][:want - n_in]
+    con = sqlite3.connect(db)
+    con.executemany("DELETE FROM work_results WHERE job_id = ?", [(j,) for j in add])
+    con.commit()
+    con.close()
+    return len(add)
+
+
+def _pending(db: Path) -> int:
+    con = sqlite3.connect(db)
+    n = con.execute("SELECT COUNT(*) FROM work_items w LEFT JOIN work_results r ON r.job_id = w.job_id "
+                    "WHERE r.job_id IS NULL").fetchone()[0]
+    con.close()
+    return n
+
+
 def _cosmic_ray() -> list[str]:
     exe = Path(sys.executable).with_name("cosmic-ray")
     if not exe.exists():
@@ -234,14 +336,21 @@ def prepare(module: str, tree: Path, workdir: Path, max_per_module: int | None, 
     """Baseline, config and session (``cosmic-ray init``) for one module, with the skip marks."""
     cfg, db = _session_paths(workdir, module)
     cfg.parent.mkdir(parents=True, exist_ok=True)
+    sha = _session_sha(cfg)
+    if db.exists() and sha is not None and sha != _sha(tree / module):   # the module changed (--refresh)
+        stale = workdir / "sessions" / "stale"
+        stale.mkdir(exist_ok=True)
+        for p in (cfg, db):
+            p.rename(stale / f"{p.stem}-{sha[:8]}{p.suffix}")
+        print(f"mutation: {module} changed since its session: old session moved to {stale}, new session",
+              flush=True)
     if db.exists():
+        added = extend_sample(module, db, max_per_module, seed) if max_per_module is not None else 0
+        if added:
+            print(f"mutation: {module}: sample extended by {added}", flush=True)
         return cfg, db
     # baseline on the unmutated snapshot: must pass; warms the shared numba cache
-    cmd = [sys.executable, str(Path(__file__).resolve()), "_test", module, "--workdir", str(workdir)]
-    subprocess.call(cmd + ["--warm"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)   # warm-up
-    t0 = time.monotonic()
-    rc = subprocess.call(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    baseline = time.monotonic() - t0
+    rc, baseline = _baseline(module, workdir)
     if rc != 0:
         raise SystemExit(f"mutation: the tests of {module} fail on the unmutated code (rc {rc})")
     timeout = max(20.0, 3.0 * baseline + 10.0)
@@ -252,6 +361,7 @@ def prepare(module: str, tree: Path, workdir: Path, max_per_module: int | None, 
         "excluded-modules = []\n"
         f"test-command = \"{sys.executable} {Path(__file__).resolve()} _test {module} --workdir {workdir}\"\n"
         f"# baseline {baseline:.1f} s\n"
+        f"# module sha256 {_sha(tree / module)}\n"
         "[cosmic-ray.distributor]\nname = \"local\"\n")
     subprocess.run(_cosmic_ray() + ["init", str(cfg), str(db)], check=True, stdout=subprocess.DEVNULL)
     spans = _annotation_spans(tree / module)
@@ -285,15 +395,33 @@ def prepare(module: str, tree: Path, workdir: Path, max_per_module: int | None, 
 
 
 def execute(module: str, tree: Path, workdir: Path, max_per_module: int | None, seed: int,
-            rerun_survivors: bool = False) -> None:
+            rerun_survivors: bool = False, rerun_timeouts: bool = False) -> None:
+    cfg0, db0 = _session_paths(workdir, module)
+    existed = db0.exists() and _session_sha(cfg0) in (None, _sha(tree / module))   # and not re-made as stale
     cfg, db = prepare(module, tree, workdir, max_per_module, seed)
-    if rerun_survivors:   # after new tests: run the survivors again (the snapshot's tests were refreshed)
+    jobs: list[str] = []
+    if rerun_survivors or rerun_timeouts:
         c = classify(module, workdir, load_equivalents())   # hand-checked equivalents are not run again
-        jobs = [job for job, *_ in c["survivor_jobs"]]
+        if rerun_survivors:   # after new tests: run the survivors again (the snapshot's tests were refreshed)
+            jobs += [job for job, *_ in c["survivor_jobs"]]
+        if rerun_timeouts:   # a timeout on a loaded machine may be the load, not the mutant: run those again
+            jobs += [job for job, *_ in c["timeout_jobs"]]
         con = sqlite3.connect(db)
         con.executemany("DELETE FROM work_results WHERE job_id = ?", [(j,) for j in jobs])
         con.commit()
         con.close()
+    if existed and _pending(db):   # the tests may have changed since the session was made: they must still pass
+        rc, baseline = _baseline(module, workdir, warm=False)
+        if rc != 0:
+            raise SystemExit(f"mutation: the tests of {module} fail on the unmutated code (rc {rc})")
+        # the machine may be more loaded than when the session was made: the timeout follows the new baseline
+        text = cfg.read_text()
+        old_t = float(next(ln.split("=")[1] for ln in text.splitlines() if ln.startswith("timeout =")))
+        new_t = max(old_t, 3.0 * baseline + 10.0)
+        if new_t > old_t:
+            cfg.write_text(text.replace(f"timeout = {old_t:.1f}\n", f"timeout = {new_t:.1f}\n"))
+        print(f"mutation: {module}: baseline re-checked ({baseline:.1f} s), {_pending(db)} pending, "
+              f"timeout {new_t:.0f} s", flush=True)
     t0 = time.monotonic()
     subprocess.run(_cosmic_ray() + ["exec", str(cfg), str(db)], check=True, cwd=tree)
     print(f"mutation: {module} done in {time.monotonic() - t0:.0f} s", flush=True)
@@ -335,7 +463,7 @@ def classify(module: str, workdir: Path, equivalents: list[dict]) -> dict | None
                          None if r is None else r.output, None if r is None else r.diff))
     out = {"module": module, "total": 0, "killed": 0, "survived": 0, "timeout": 0, "equivalent": 0,
            "pending": 0, "annotation": 0, "sampled_out": 0, "incompetent": 0, "survivors": [], "unused_eq": [],
-           "survivor_jobs": [], "wrong_eq": []}
+           "survivor_jobs": [], "wrong_eq": [], "timeout_jobs": []}
     used = set()
     for job, op, row, col, wo, to, output, diff in rows:
         if wo == "skipped":
@@ -343,6 +471,9 @@ def classify(module: str, workdir: Path, equivalents: list[dict]) -> dict | None
                 out["annotation"] += 1
             elif output == SKIP_SAMPLE:
                 out["sampled_out"] += 1
+                eq = _is_equivalent(module, op, row, col, equivalents)
+                if eq is not None:   # an entry for a mutant not in the sample: not stale, just not counted
+                    used.add(id(eq))
             continue
         out["total"] += 1
         eq = _is_equivalent(module, op, row, col, equivalents)
@@ -359,6 +490,7 @@ def classify(module: str, workdir: Path, equivalents: list[dict]) -> dict | None
             out["killed"] += 1     # not applicable: should not happen with a fresh session
         elif to == "killed" and (output or "").strip() == "timeout":
             out["timeout"] += 1
+            out["timeout_jobs"].append((job, row, col, op))
         elif to == "killed":
             out["killed"] += 1
         elif to == "incompetent" or wo == "exception":
@@ -381,8 +513,33 @@ def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return (c - h, c + h)
 
 
+def stratified(strata: list[tuple[int, int, int, int]], z: float = 1.96) -> tuple[float, float, float]:
+    """Score of a population from a stratified sample, with its 95 % interval.
+
+    ``strata``: per module ``(N, n, e, k)``: mutants in the module, run, equivalent among those run, killed
+    among those run. Weight of a module: its estimated number of non-equivalent mutants ``N (n - e) / n``;
+    estimate ``p = sum W_h p_h`` with ``p_h = k_h / (n_h - e_h)``. Interval: MOVER (Zou & Donner 2008) for a linear
+    combination of proportions on the per-module Wilson intervals ``(l_h, u_h)``:
+    ``p - sqrt(sum W_h^2 (p_h - l_h)^2 f_h)``, ``p + sqrt(sum W_h^2 (u_h - p_h)^2 f_h)``, with the
+    finite-population correction ``f_h = (N_h - n_h) / (N_h - 1)`` (0 for a module run in full: no sampling error)."""
+    rows = [(N * (n - e) / n, n - e, k, N, n) for N, n, e, k in strata if n > e]
+    tot = sum(w for w, *_ in rows)
+    if not tot:
+        return (float("nan"),) * 3
+    est = v_lo = v_hi = 0.0
+    for w, m, k, N, n in rows:
+        w /= tot
+        lo, hi = _wilson(k, m, z)
+        f = (N - n) / (N - 1) if N > 1 else 0.0
+        est += w * k / m
+        v_lo += w * w * (k / m - lo) ** 2 * f
+        v_hi += w * w * (hi - k / m) ** 2 * f
+    return est, max(0.0, est - math.sqrt(v_lo)), min(1.0, est + math.sqrt(v_hi))
+
+
 def report(modules: list[str], workdir: Path) -> str:
     equivalents = load_equivalents()
+    strata: dict[str, list] = {}
     head = ("| module | mutants | killed | survived | timeout | equiv. excluded | score | annot. | sample |\n"
             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     lines = [head]
@@ -404,6 +561,15 @@ def report(modules: list[str], workdir: Path) -> str:
         if c["sampled_out"]:
             lo, hi = _wilson(hit, den)
             sample = f"{c['total']}/{c['total'] + c['sampled_out']} ({100 * lo:.0f}-{100 * hi:.0f} %)"
+        if c["pending"] == 0:
+            strata.setdefault("slam/" if m.startswith("semslam/slam/") else "descriptor kernels", []).append(
+                (c["total"] + c["sampled_out"], c["total"], c["equivalent"], hit))
+        cfg = _session_paths(workdir, m)[0]
+        sha = _session_sha(cfg)
+        if sha is not None and sha != _sha(workdir / "tree" / m):
+            sample += ", older code"
+        if sha is not None and sha != _sha(ROOT / m):
+            sample += ", work tree changed since"
         pend = f" (+{c['pending']} pending)" if c["pending"] else ""
         lines.append(f"| {_short(m)} | {c['total']}{pend} | {hit} | {c['survived']} | {c['timeout']} | "
                      f"{c['equivalent']} | {score} | {c['annotation']} | {sample} |")
@@ -418,6 +584,18 @@ def report(modules: list[str], workdir: Path) -> str:
         score = f"{100 * hit / den:.1f} %" if den else "-"
         lines.append(f"| **{name}, all run** | {t['total']} | {hit} | {t['survived']} | {t['timeout']} | "
                      f"{t['equivalent']} | **{score}** | {t['annotation']} | |")
+    for name, st in strata.items():
+        est, lo, hi = stratified(st)
+        N = sum(x[0] for x in st)
+        n = sum(x[1] for x in st)
+        lines.append(f"| **{name}, stratified estimate** | {n} of {N} | | | | | **{100 * est:.1f} %** | | "
+                     f"95 %: {100 * lo:.1f}-{100 * hi:.1f} % |")
+    lines.append("")
+    lines.append("Stratified estimate: the modules are the strata; each module's score is weighted by its estimated "
+                 "number of non-equivalent mutants N_h (n_h - e_h) / n_h (N_h mutants, n_h run, e_h equivalent); "
+                 "95 % interval: MOVER (Zou & Donner 2008) on the per-module Wilson intervals, each scaled by the "
+                 "finite-population correction sqrt((N_h - n_h) / (N_h - 1)) (no sampling error in a module run in "
+                 "full). Modules with pending mutants are left out of it.")
     return "\n".join(lines)
 
 
@@ -447,8 +625,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-per-module", type=int, default=None, help="seeded random sample per module")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--fresh", action="store_true", help="new snapshot and sessions")
+    p.add_argument("--refresh", action="store_true",
+                   help="copy the current code into the snapshot (sessions of changed modules are redone)")
     p.add_argument("--report", action="store_true", help="only print the table")
     p.add_argument("--rerun-survivors", action="store_true", help="run the surviving mutants again")
+    p.add_argument("--rerun-timeouts", action="store_true", help="run the timed-out mutants again")
+    p.add_argument("--trim-pending", action="store_true",
+                   help="put the pending mutants of an interrupted session out of the sample (no test is run)")
     p.add_argument("--survivors", metavar="MODULE", help="print the surviving mutants' diffs")
     a = p.parse_args(argv)
     if a.survivors:
@@ -461,14 +644,27 @@ def main(argv: list[str] | None = None) -> int:
     if part in ("kernels", "all"):
         modules += KERNEL_MODULES
     modules = list(dict.fromkeys(modules))
+    if a.trim_pending:   # cosmic-ray runs pending mutants in random order: what was run is a random subsample
+        for m in modules:
+            db = _session_paths(a.workdir, m)[1]
+            if db.exists() and _pending(db):
+                con = sqlite3.connect(db)
+                jobs = [r[0] for r in con.execute("SELECT w.job_id FROM work_items w LEFT JOIN work_results r ON "
+                                                  "r.job_id = w.job_id WHERE r.job_id IS NULL")]
+                con.executemany("INSERT INTO work_results (worker_outcome, output, test_outcome, diff, job_id) "
+                                "VALUES ('SKIPPED', ?, NULL, NULL, ?)", [(SKIP_SAMPLE, j) for j in jobs])
+                con.commit()
+                con.close()
+                print(f"mutation: {m}: {len(jobs)} pending mutants put out of the sample", flush=True)
+        a.report = True
     if not a.report:
         import cosmic_ray  # noqa: F401  (fail early when the extra is missing)
         from importlib.metadata import version
         print(f"mutation: cosmic-ray {version('cosmic-ray')}, python {sys.version.split()[0]}, "
               f"{len(modules)} module(s), workdir {a.workdir}", flush=True)
-        tree = snapshot(a.workdir, a.fresh)
+        tree = snapshot(a.workdir, a.fresh, a.refresh)
         for m in modules:
-            execute(m, tree, a.workdir, a.max_per_module, a.seed, a.rerun_survivors)
+            execute(m, tree, a.workdir, a.max_per_module, a.seed, a.rerun_survivors, a.rerun_timeouts)
     print(report(modules, a.workdir))
     return 0
 

@@ -77,3 +77,97 @@ def test_landmark_error_metrics_only_when_there_are_landmarks_and_objects():
     out = evaluate_run(replace(res, landmarks=[lm]), SimpleNamespace(truth=None, objects=objs))
     assert out.metrics["n_objects_mapped"] == 1
     assert out.metrics["landmark_position_error_mean_m"] == pytest.approx(0.05, abs=1e-12)
+
+
+def test_upside_down_axis_of_a_continuous_symmetry_is_pi_not_nan():
+    """Catches a cosine clipped to ``[-2, 1]`` instead of ``[-1, 1]`` before ``arccos``: an estimate whose symmetry
+    axis is exactly reversed gives a dot product of -1 - 2.2e-16 in floating point, and the orientation error must
+    be pi, not NaN."""
+    rpy = np.array([0.2739233746429086, -0.4604265724722594, -0.9180529521276106])
+    R_true = rotation_from_rpy(*rpy) @ Rotation.from_rotvec([np.pi, 0.0, 0.0]).as_matrix()
+    lm, objs = _scene(rpy, R_true)
+    axis = np.array([0.0, 0.0, 1.0])
+    dot = (rotation_from_rpy(*lm.pose_xyzrpy[3:6]) @ axis) @ (objs[1].T_world_object.rotation @ axis)
+    assert dot < -1.0  # the rounding case this test is about
+    out = evaluate_landmark(lm, objs, Symmetry("continuous", axis_object=axis))
+    assert out.orientation_error_rad == pytest.approx(np.pi, abs=1e-12)
+
+
+def test_landmark_position_nees_is_the_error_truth_minus_estimate():
+    """Catches a position error ``truth + estimate`` (``+`` for ``-``) in the landmark NEES: with the estimate 5 cm
+    from the true object along x and covariance 0.01 I, the 3-dof NEES is 0.05^2 / 0.01 = 0.25; the 6-dof NEES of a
+    perfect orientation is the same."""
+    rpy = np.array([0.1, 0.2, 0.3])
+    lm, objs = _scene(rpy, rotation_from_rpy(*rpy))
+    out = evaluate_landmark(lm, objs, Symmetry())
+    assert out.nees_position == pytest.approx(0.25, rel=1e-9)
+    assert out.nees_pose == pytest.approx(0.25, rel=1e-9)
+
+
+def _result(k=2, landmarks=(), update_log=(), metrics=None, smoothed=None):
+    from semslam.slam import SlamConfig
+    from semslam.slam.results import SlamResult
+
+    cov = np.tile(np.eye(3), (k, 1, 1))
+    return SlamResult(mode="pose", stamps_s=np.arange(k, dtype=float), position_ned_m=np.zeros((k, 3)),
+                      position_cov_m2=cov, velocity_body_mps=np.zeros((k, 3)), velocity_cov=cov,
+                      yaw_bias_rad=np.zeros(k), truth_position_ned_m=None, landmarks=list(landmarks),
+                      update_log=list(update_log), metrics=dict(metrics or {}), config=SlamConfig(),
+                      smoothed_position_ned_m=smoothed, smoothed_position_cov_m2=None if smoothed is None else cov)
+
+
+def test_wrong_object_updates_count_only_accepted_landmark_updates():
+    """Catches ``!=`` for ``==`` in the record filter of ``wrong_object_updates``: only *accepted landmark updates*
+    whose detection came from another object than the landmark's matched one count -- not a rejected update, not
+    the creation of a landmark (``new_landmark``) nor a consensus candidate."""
+    from semslam.slam.evaluation import evaluate_run
+
+    lm, objs = _scene(np.array([0.1, 0.2, 0.3]), rotation_from_rpy(0.1, 0.2, 0.3))   # matched to tee_1
+    log = [dict(kind="landmark", landmark=0, accepted=True, object_name="tee_2"),    # wrong object: counts
+           dict(kind="landmark", landmark=0, accepted=True, object_name="tee_1"),    # right object
+           dict(kind="landmark", landmark=0, accepted=False, object_name="tee_2"),   # rejected
+           dict(kind="new_landmark", landmark=0, accepted=True, object_name="tee_2"),
+           dict(kind="candidate", accepted=True, object_name="tee_2")]
+    out = evaluate_run(_result(landmarks=[lm], update_log=log), SimpleNamespace(truth=None, objects=objs))
+    assert out.metrics["wrong_object_updates"] == 1
+
+
+@pytest.mark.parametrize("smoother", [False, True])
+def test_smoothed_metrics_only_for_a_run_with_a_smoother_and_truth(smoother):
+    """Catches ``or`` for ``and`` in the smoothed-metrics guard: a run with ground truth but no smoother (no
+    ``metrics["smoother"]``, no smoothed trajectory) gets no smoothed ATE (and no error); a run with both gets the
+    smoothed trajectory's ATE against the truth (here 1 m, the online one 0)."""
+    from semslam.slam.evaluation import evaluate_run
+
+    k = 2
+    truth = SimpleNamespace(interpolate_position=lambda t: np.zeros((len(t), 3)))
+    res = _result(k, metrics={"smoother": {"status": "ok"}} if smoother else {},
+                  smoothed=np.tile([1.0, 0.0, 0.0], (k, 1)) if smoother else None)
+    out = evaluate_run(res, SimpleNamespace(truth=truth, objects=[]))
+    assert out.metrics["ate_rmse_m"] == 0.0
+    if smoother:
+        assert out.metrics["smoother"]["status"] == "ok"
+        assert out.metrics["smoother"]["ate_rmse_m"] == pytest.approx(1.0, rel=1e-12)
+    else:
+        assert "smoother" not in out.metrics
+
+
+def test_landmark_error_summaries_are_nan_aware_and_none_without_any_match():
+    """Catches an inverted "any finite error" test of the landmark error summaries (``not np.isfinite(pe).any()``):
+    with two landmarks, one matched 5 cm from its object and one of a class with no true object (NaN errors), the
+    mean and max position errors are 0.05 m (the NaN ignored) and the orientation error is the matched one's; with
+    only the unmatched landmark, every summary is None (not NaN)."""
+    from semslam.slam.evaluation import evaluate_run
+
+    rpy = np.array([0.1, 0.2, 0.3])
+    lm, objs = _scene(rpy, Rotation.from_rotvec([0.0, 0.0, 0.02]).as_matrix() @ rotation_from_rpy(*rpy))
+    other = LandmarkEstimate(1, "flange", np.r_[5.0, 5.0, 5.0, rpy], np.eye(6) * 0.01, 0.0, 1.0, 3)
+    out = evaluate_run(_result(landmarks=[lm, other]), SimpleNamespace(truth=None, objects=objs))
+    m = out.metrics
+    assert m["landmark_position_error_mean_m"] == pytest.approx(0.05, abs=1e-12)
+    assert m["landmark_position_error_max_m"] == pytest.approx(0.05, abs=1e-12)
+    assert m["landmark_orientation_error_mean_deg"] == pytest.approx(np.degrees(0.02), rel=1e-9)
+    assert m["n_objects_mapped"] == 1
+    m = evaluate_run(_result(landmarks=[other]), SimpleNamespace(truth=None, objects=objs)).metrics
+    assert m["landmark_position_error_mean_m"] is None and m["landmark_position_error_max_m"] is None
+    assert m["landmark_orientation_error_mean_deg"] is None and m["n_objects_mapped"] == 0

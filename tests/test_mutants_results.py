@@ -26,7 +26,8 @@ def test_position_error_is_none_without_truth_and_the_distance_with_it():
 
 def test_result_records_are_immutable_and_compared_by_identity():
     """Catches result records that became mutable (``frozen=False``) or value-compared (``eq=True``: their arrays
-    make ``==`` ambiguous and the objects unhashable): a finished result must not change under its reader."""
+    make ``==`` ambiguous and the objects unhashable; each of ``SlamResult``, ``SlamEstimate`` and
+``LandmarkEstimate``): a finished result must not change under its reader."""
     import dataclasses
 
     from semslam.slam.results import LandmarkEstimate, SlamEstimate
@@ -41,6 +42,6 @@ def test_result_records_are_immutable_and_compared_by_identity():
     for obj, name in ((res, "mode"), (lm, "label"), (est, "stamp_s")):
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(obj, name, getattr(obj, name))
-    for obj in (res, est):
+    for obj in (res, est, lm):
         twin = dataclasses.replace(obj)
         assert obj != twin and obj == obj and len({obj, twin}) == 2

@@ -45,3 +45,26 @@ def test_mode_dirs_lists_only_modes_with_a_trajectory(tmp_path: Path):
     found = mode_dirs(tmp_path, ["dr", "pose", "pose+heading", "position"])
     assert found == {"pose": mode_dir(tmp_path, "pose"), "pose+heading": mode_dir(tmp_path, "pose+heading")}
     assert found["pose+heading"].name == "pose_heading"
+
+
+def test_trajectory_csv_carries_the_attitude_or_nan_without_it(tmp_path: Path):
+    """Catches an inverted "has attitude" test in ``trajectory.csv`` (``is None`` for ``is not None``) and a wrong
+    number of placeholders (``(nan,) * 4``): the roll, pitch and yaw columns hold the result's attitude per epoch
+    (9 significant digits), and exactly three ``nan`` for a result without attitude."""
+    from dataclasses import replace
+
+    from semslam.slam.rundir import TRAJECTORY
+
+    k = 3
+    cov = np.tile(np.eye(3) * 1e-4, (k, 1, 1))
+    att = np.array([[0.1, -0.2, 0.3], [0.01, 0.02, -3.1], [0.0, 0.5, 1.25]])
+    res = SlamResult(mode="pose", stamps_s=np.arange(k) * 0.5, position_ned_m=np.zeros((k, 3)), position_cov_m2=cov,
+                     velocity_body_mps=np.zeros((k, 3)), velocity_cov=cov.copy(), yaw_bias_rad=np.zeros(k),
+                     truth_position_ned_m=None, landmarks=[], update_log=[], metrics={}, config=SlamConfig(),
+                     attitude_rpy_rad=att)
+    rows = list(csv.DictReader((write_run(res, tmp_path / "a") / TRAJECTORY).open()))
+    got = np.array([[float(r[c]) for c in ("roll_rad", "pitch_rad", "yaw_rad")] for r in rows])
+    np.testing.assert_allclose(got, att, rtol=1e-9)
+    rows = list(csv.DictReader((write_run(replace(res, attitude_rpy_rad=None), tmp_path / "b") / TRAJECTORY).open()))
+    assert all(r[c] == "nan" for r in rows for c in ("roll_rad", "pitch_rad", "yaw_rad"))
+    assert all(None not in r for r in rows)  # exactly one value per header column (csv.DictReader's rest key)
