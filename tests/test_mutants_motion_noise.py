@@ -44,3 +44,31 @@ def test_default_lags_and_quantile():
     assert out.lags_s == (1.0, 2.0, 3.0, 5.0, 10.0)
     assert out.n_increments == sum(60 - tau for tau in (1, 2, 3, 5, 10))
     assert out.velocity_rw_mps_per_sqrt_s[0] == pytest.approx(round(0.01 * np.sqrt(10.0), 4))
+
+
+def _step_log_with_a_hole():
+    """Velocity 0 for 10 s, no DVL for 2.375 s, then 1 m/s surge: stamps exact in binary (0.25 s period)."""
+    t = np.r_[np.arange(40) * 0.25, 12.125 + np.arange(40) * 0.25]
+    v = np.zeros((80, 3))
+    v[40:, 0] = 1.0
+    return DvlLog(t, v, np.ones(80, bool))
+
+
+def test_increments_are_paired_within_half_a_period_of_the_lag():
+    """Catches the lag tolerance ``0.5 / period`` for ``0.5 * period`` (2 s instead of 0.125 s here): pairs across a
+    2.4 s gap in the log would count as 1 s increments and turn a velocity step into a random walk. At a 1 s lag
+    each 10 s stretch of 40 samples has 36 pairs and none spans the gap."""
+    m = measure_unaided_motion(_step_log_with_a_hole(), lags_s=(1.0,), quantile=0.999)
+    assert m.n_increments == 72
+    assert m.velocity_rw_mps_per_sqrt_s == (0.0, 0.0, 0.0)
+
+
+def test_a_log_too_short_to_measure_does_not_end_the_measurement():
+    """Catches ``break`` for ``continue`` after a log with fewer than 2 valid samples: the logs after it were
+    ignored (here: all of them, so the call failed)."""
+    short = DvlLog(np.array([0.0]), np.zeros((1, 3)), np.ones(1, bool))
+    log = _step_log_with_a_hole()
+    both = measure_unaided_motion([short, log], lags_s=(1.0,), quantile=0.999)
+    alone = measure_unaided_motion(log, lags_s=(1.0,), quantile=0.999)
+    assert both.n_increments == alone.n_increments == 72
+    assert both.velocity_rw_mps_per_sqrt_s == alone.velocity_rw_mps_per_sqrt_s
