@@ -28,7 +28,7 @@ from semslam.dataset import (
 )
 from semslam.errors import DatasetError, SemslamError, SlamError
 from semslam.geometry import RigidTransform
-from semslam.slam import SlamConfig, SlamSession, merged_messages, run_slam
+from semslam.slam import SlamConfig, SlamSession, feed_message, merged_messages, run_slam
 
 
 def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
@@ -74,15 +74,7 @@ def _stream(session: SlamSession, ds: Dataset, dets: dict, attitude_lead_s: floa
     msgs = list(merged_messages(ds, dets))
     key = [(t - (attitude_lead_s if kind == "attitude" else 0.0), i) for i, (t, kind, _) in enumerate(msgs)]
     for _, i in sorted(key):
-        t, kind, payload = msgs[i]
-        if kind == "attitude":
-            session.add_attitude(t, *payload)
-        elif kind == "dvl":
-            session.add_dvl(t, payload[0], valid=payload[1], beam_range_m=payload[2])
-        elif kind == "depth":
-            session.add_depth(t, *payload)
-        else:
-            session.add_detections(t, *payload)
+        feed_message(session, *msgs[i])
 
 
 @pytest.fixture(scope="module")
@@ -350,3 +342,13 @@ def test_detection_records_are_typed_strictly():
             Detection.from_dict({**good, key: value})
     with pytest.raises(InputError, match="JSON object"):
         Detection.from_dict([1, 2])
+
+
+def test_feed_message_rejects_an_unknown_kind():
+    """A message kind that is none of merged_messages' four is an error naming it, never silently dropped."""
+    from semslam.dataset import VehicleDescription
+    from semslam.errors import SlamError
+
+    session = SlamSession(VehicleDescription.girona500(), mode="dr", start_stamp_s=0.0)
+    with pytest.raises(SlamError, match="'kind' argument of feed_message.*Got 'sonar'"):
+        feed_message(session, 0.0, "sonar", ())

@@ -15,7 +15,7 @@ from semslam.errors import SlamError  # noqa: E402
 from semslam.experiments.synthetic import square_mission  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
-from semslam.slam import SlamConfig, SlamSession, merged_messages, run_slam  # noqa: E402
+from semslam.slam import SlamConfig, SlamSession, feed_message, merged_messages, run_slam  # noqa: E402
 from semslam.slam.graph import GraphBackend, GraphSession  # noqa: E402
 from semslam.slam.graph.factors import segment_factor  # noqa: E402
 
@@ -82,14 +82,7 @@ def test_isam2_estimate_at_any_time_is_the_filter_estimate(mission, dets):
     checked = 0
     for n, (t, kind, payload) in enumerate(merged_messages(mission, dets)):
         for s in (s_e, s_g):
-            if kind == "attitude":
-                s.add_attitude(t, *payload)
-            elif kind == "dvl":
-                s.add_dvl(t, payload[0], valid=payload[1], beam_range_m=payload[2])
-            elif kind == "depth":
-                s.add_depth(t, *payload)
-            else:
-                s.add_detections(t, *payload)
+            feed_message(s, t, kind, payload)
         if kind == "attitude" and n % 97 == 0 and t > 1.0:
             a, g = s_e.estimate(), s_g.estimate()
             assert g.stamp_s == a.stamp_s

@@ -18,7 +18,7 @@ from semslam.experiments.synthetic import square_mission  # noqa: E402
 from semslam.geometry import RigidTransform, rotation_from_rpy  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
-from semslam.slam import merged_messages  # noqa: E402
+from semslam.slam import feed_message, merged_messages  # noqa: E402
 from semslam.slam.association import measurement_from_detection  # noqa: E402
 from semslam.slam.graph import GraphSession  # noqa: E402
 
@@ -42,15 +42,10 @@ def _session(mission):
 def _feed(s, msgs):
     last = {}
     for t, kind, payload in msgs:
+        feed_message(s, t, kind, payload)
         if kind == "attitude":
-            s.add_attitude(t, *payload)
             last["rpy"] = payload[0]
-        elif kind == "dvl":
-            s.add_dvl(t, payload[0], valid=payload[1], beam_range_m=payload[2])
-        elif kind == "depth":
-            s.add_depth(t, *payload)
-        else:
-            s.add_detections(t, *payload)
+        elif kind == "detections":
             last["dets"] = (t, payload[0])
     return last
 

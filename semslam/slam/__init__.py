@@ -19,7 +19,7 @@ from .evaluation import evaluate_landmark, evaluate_run
 from .metrics import anees, chi2_band, nees, trajectory_metrics
 from .results import LandmarkEstimate, SlamEstimate, SlamResult
 from .rundir import write_run
-from .runner import merged_messages, run_slam
+from .runner import feed_message, merged_messages, run_slam
 from .session import SlamSession
 
 __all__ = [
@@ -27,5 +27,5 @@ __all__ = [
     "MODES", "SlamConfig", "ConsensusInitializer", "Observation", "attitude_distance", "quaternion_mean",
     "read_detections_jsonl", "write_detections_jsonl", "SemanticEkf", "evaluate_landmark", "evaluate_run",
     "anees", "chi2_band", "nees", "trajectory_metrics", "LandmarkEstimate", "SlamEstimate", "SlamResult",
-    "write_run", "merged_messages", "run_slam", "SlamSession",
+    "write_run", "feed_message", "merged_messages", "run_slam", "SlamSession",
 ]

@@ -5,6 +5,7 @@ the dataset's ground truth when it has one."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -31,6 +32,21 @@ def _start(dataset: Dataset) -> float:
     if dataset.truth is not None:
         starts.append(dataset.truth.stamp_s[0])
     return float(max(min(starts), dataset.attitude.stamp_s[0]))
+
+
+def feed_message(session: Any, stamp_s: float, kind: str, payload: tuple) -> None:
+    """Give one message of :func:`merged_messages` to a session (any :class:`SlamSession`: its ``add_*``)."""
+    if kind == "attitude":
+        session.add_attitude(stamp_s, *payload)
+    elif kind == "dvl":
+        session.add_dvl(stamp_s, payload[0], valid=payload[1], beam_range_m=payload[2])
+    elif kind == "depth":
+        session.add_depth(stamp_s, *payload)
+    elif kind == "detections":
+        session.add_detections(stamp_s, *payload)
+    else:
+        raise SlamError(f"The 'kind' argument of feed_message must be attitude, dvl, depth or detections. Got {kind!r} "
+                        "instead.")
 
 
 def merged_messages(dataset: Dataset, detections_by_scan: dict[int, list[Detection]]):
@@ -119,12 +135,10 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
         session = GraphSession(dataset.vehicle, backend=backend, huber_k=huber_k, **kw)
     if cfg.initialisation.surveyed_objects:
         session.add_surveyed_landmarks(*_surveyed(dataset, cfg, init_rng))
-    add = {"attitude": session.add_attitude, "dvl": lambda t, v, ok, r: session.add_dvl(t, v, valid=ok, beam_range_m=r),
-           "depth": session.add_depth, "detections": session.add_detections}
     # the filter's matrices are small: BLAS threads only spin on them (6x slower on 2 busy cores, measured)
     with threadpool_limits(limits=1, user_api="blas"):
         for t, kind, payload in merged_messages(dataset, (detections_by_scan or {}) if mode != "dr" else {}):
-            add[kind](t, *payload)
+            feed_message(session, t, kind, payload)
         result = session.finish()
     return evaluate_run(result, dataset, symmetries)
 
