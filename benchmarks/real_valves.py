@@ -1,19 +1,22 @@
 """Real RealSense valve views (issue #16): rejection that generalises and relative pose at known yaw steps.
 
-    .venv/bin/python benchmarks/real_valves.py [--data ../shared/data/real/valves] [--baseline]
+    .venv/bin/python benchmarks/real_valves.py [--data ../shared/data/real/valves] [--baseline] [--max-frames N]
 
-Views: ``CLASS/pitchPPP_yawYYY_30cm/N/RANSAC.pcd`` (the authors' segmentation of the valve), cleaned by
+Views: ``CLASS/pitchPPP_yawYYY_DDcm/N/RANSAC.pcd`` (the authors' segmentation of the valve; the original
+dataset's ``CLASS/pitchPPP/pitchPPPyawYYY/DDcm/N/`` layout is read too), cleaned by
 :func:`semslam.segmentation.clean.clean_view` (their last 405 points are drawn axes and a normal, not
 geometry). Two tables:
 
 1. **Leave one setting out.** For each rig setting, a database is built from the other settings' views
-   (fused per class into one object frame with the gravity-aligned registration, camera up = -y) and the
+   (fused per class and camera pitch with the gravity-aligned registration, up = :func:`up_camera`) and the
    held-out setting's views of both classes are recognised (ESF and ESF+VFH, chi-square nearest view,
    global rejection). ``plain`` calibrates the rejection threshold by ordinary leave-one-out, ``viewpoint`` leaves
    one viewpoint out (:mod:`semslam.recognition.rejection`). Goal: >= 90 % accepted with the right class.
-2. **Relative rotation of view pairs** (every ordered pair of views of one class): ``semslam register --up
-   0,-1,0`` (:func:`semslam.registration.align_upright`); the error is the angle between the estimate and
-   a rotation of the nominal yaw step about the camera's vertical axis; ``reliable`` is the registration's
+2. **Relative rotation of view pairs** (every ordered pair of views of one class at one camera pitch): ``semslam
+   register --up UP`` (:func:`semslam.registration.align_upright`) with the rig's vertical in the camera frame
+   (``-y`` at pitch 0; tilted by the pitch otherwise, its sign measured from the rig's backboard in the full
+   frames: :func:`pitch_signs`); the error is the angle between the estimate and a rotation of the nominal yaw
+   step about that vertical; ``reliable`` is the registration's
    own verdict. Goal: >= 85 % within 10 degrees, no reliable answer off by more than 30 degrees.
    ``--baseline`` adds the 6-DoF feature registration (FPFH + prerejective RANSAC + ICP) for comparison.
 """
@@ -31,7 +34,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from semslam.cloud import PointCloud  # noqa: E402
 from semslam.io import read_point_cloud  # noqa: E402
 from semslam.pipeline.fuse import fuse_class_views  # noqa: E402
 from semslam.recognition import Recognizer  # noqa: E402
@@ -42,16 +44,113 @@ from semslam.segmentation.clean import clean_view  # noqa: E402
 UP_CAMERA = (0.0, -1.0, 0.0)
 
 
-def load_views(data: Path) -> list[dict]:
+SETTING_RE = re.compile(r"pitch(-?\d+)[_/]?yaw(-?\d+)(?:[_/](\d+)cm)?")
+
+
+def parse_setting(text: str) -> tuple[int, int, int | None]:
+    """``(pitch_deg, yaw_deg, distance_cm or None)`` from a setting's path: ``pitch000_yaw-030_30cm`` (this
+    repository's layout) or the original dataset's ``pitch030/pitch030yaw-015/30cm``."""
+    m = SETTING_RE.search(text)
+    if m is None:
+        raise ValueError(f"no 'pitchPPP...yawYYY' setting in the path {text!r}")
+    return int(m.group(1)), int(m.group(2)), (int(m.group(3)) if m.group(3) else None)
+
+
+def load_views(data: Path, max_frames: int | None = None) -> list[dict]:
+    """Every view under ``data``: ``CLASS/<setting path>/N/RANSAC.pcd`` (nested, any depth: the shared layout and
+    the original dataset's), or a flat ``CLASS/SETTING_N.pcd`` (``tests/data/real_valves``). ``max_frames``
+    keeps the first frames of each setting (natural order)."""
     out = []
-    nested = sorted(data.glob("*/*/*/RANSAC.pcd"))  # the shared layout CLASS/SETTING/N/RANSAC.pcd
-    for f in nested or sorted(data.glob("*/*.pcd")):  # or a flat CLASS/SETTING_N.pcd (tests/data/real_valves)
-        parts = f.relative_to(data).parts
-        cls = parts[0]
-        setting, frame = (parts[1], parts[2]) if nested else tuple(f.stem.rsplit("_", 1))
-        cloud = clean_view(read_point_cloud(f), name=str(f))[0]
-        yaw = int(re.search(r"yaw(-?\d+)", setting).group(1))
-        out.append({"cls": cls, "setting": setting, "frame": frame, "yaw": yaw, "cloud": cloud})
+    nested = sorted(data.glob("*/**/RANSAC.pcd"))
+    for f in nested or sorted(data.glob("*/*.pcd")):
+        rel = f.relative_to(data)
+        cls = rel.parts[0]
+        if nested:
+            setting, frame = "/".join(rel.parts[1:-2]), rel.parts[-2]
+        else:
+            setting, frame = tuple(f.stem.rsplit("_", 1))
+        pitch, yaw, dist = parse_setting(setting)
+        out.append({"cls": cls, "setting": setting, "frame": frame, "pitch": pitch, "yaw": yaw, "dist": dist,
+                    "path": f})
+    if max_frames is not None:
+        kept: dict = {}
+        out.sort(key=lambda v: (v["cls"], v["setting"], int(v["frame"]) if v["frame"].isdigit() else v["frame"]))
+        out = [v for v in out if kept.setdefault((v["cls"], v["setting"]), []).append(v) or
+               len(kept[(v["cls"], v["setting"])]) <= max_frames]
+    for v in out:
+        v["cloud"] = clean_view(read_point_cloud(v["path"]), name=str(v["path"]))[0]
+    return out
+
+
+def up_camera(pitch_deg: float, sign: int = 1) -> np.ndarray:
+    """The rig's vertical (up) in the camera frame (x right, y down, z forward) for a camera pitched by
+    ``pitch_deg``: ``(0, -cos p, -sign sin p)``; ``sign=+1`` is a camera looking down on the valve. At pitch 0 it
+    is ``-y`` whatever the sign. (The sign is measured where it can be: :func:`pitch_signs`.)"""
+    p = np.radians(pitch_deg)
+    return np.array([0.0, -np.cos(p), -sign * np.sin(p)]) + 0.0  # no -0.0 in the printout
+
+
+def rot_about_up(up: np.ndarray, step_deg: float) -> np.ndarray:
+    """Rotation of the object seen by the camera when the rig turns by ``step_deg`` about its vertical ``up``
+    (camera frame); at pitch 0 it is the rotation about +y (:func:`rot_about_camera_vertical`)."""
+    from scipy.spatial.transform import Rotation
+
+    a = -np.asarray(up, dtype=float) / np.linalg.norm(up)
+    return Rotation.from_rotvec(np.radians(step_deg) * a).as_matrix()
+
+
+def board_normal(frame_path: Path) -> np.ndarray | None:
+    """Normal (towards the camera) of the dominant plane of a full frame within 0.6 m: the rig's backboard,
+    which turns with the valve. None when there is no full frame or no plane."""
+    from semslam.segmentation import remove_dominant_planes
+
+    if not frame_path.is_file():
+        return None
+    p = read_point_cloud(frame_path).points_xyz_m
+    r = np.linalg.norm(p, axis=1)
+    p = p[(r > 1e-6) & (r < 0.6)]
+    if len(p) < 1000:
+        return None
+    res = remove_dominant_planes(p, distance_threshold_m=0.01, max_planes=1, min_inliers=1000, seed=0)
+    if not res.planes:
+        return None
+    n = np.asarray(res.planes[0].coefficients[:3], dtype=float)  # unit, towards the camera (d >= 0)
+    return n / np.linalg.norm(n)
+
+
+def pitch_signs(views: list[dict]) -> dict:
+    """``{(cls, pitch): (sign, how)}``: which way a non-zero pitch tilts the camera, measured from the data.
+
+    The rig's backboard turns with the valve, so the normals of its plane in the settings of one pitch lie on a
+    cone about the rig's vertical: their pairwise cross products give that axis (oriented up, y < 0). Its z
+    component picks the sign of :func:`up_camera`. Without full frames or with one yaw setting only, ``+1``
+    (a camera looking down, as the authors' ``log.csv`` of pitch 30 suggests) is assumed and said."""
+    out = {}
+    groups: dict = {}
+    for v in views:
+        groups.setdefault((v["cls"], v["pitch"]), {}).setdefault(v["yaw"], v)
+    for (cls, pitch), by_yaw in groups.items():
+        if pitch == 0:
+            out[(cls, pitch)] = (1, "pitch 0")
+            continue
+        normals = {}
+        for yaw, v in by_yaw.items():
+            n = board_normal(Path(v["path"]).with_name("Captured_Frame.pcd"))
+            if n is not None:
+                normals[yaw] = n
+        axes = []
+        yaws = sorted(normals)
+        for i, ya in enumerate(yaws):
+            for yb in yaws[i + 1:]:
+                c = np.cross(normals[ya], normals[yb])
+                if np.linalg.norm(c) > np.sin(np.radians(5)):
+                    c /= np.linalg.norm(c)
+                    axes.append(-c if c[1] > 0 else c)
+        if not axes:
+            out[(cls, pitch)] = (1, "assumed (no backboard measurement)")
+            continue
+        axis = np.mean(axes, axis=0)
+        out[(cls, pitch)] = (1 if axis[2] < 0 else -1, f"measured (backboard axis {np.round(axis / np.linalg.norm(axis), 3).tolist()})")
     return out
 
 
@@ -66,23 +165,31 @@ def angle_deg(R: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def fused_database(train: list[dict], up=UP_CAMERA):
+def view_up(v: dict, signs: dict | None = None) -> np.ndarray:
+    sign = (signs or {}).get((v["cls"], v["pitch"]), (1, ""))[0]
+    return up_camera(v["pitch"], sign)
+
+
+def fused_database(train: list[dict], signs: dict | None = None):
+    """ESF/VFH database of the training views, fused per class and camera pitch (each pitch has its own up
+    direction; the descriptors do not depend on the object frame, so one class may have several)."""
     fused = []
-    for cls in sorted({v["cls"] for v in train}):
-        items = [(f'{v["setting"]}_{v["frame"]}', v["cloud"]) for v in train if v["cls"] == cls]
-        out, _ = fuse_class_views(cls, items, up_sensor=up)
+    for cls, pitch in sorted({(v["cls"], v["pitch"]) for v in train}):
+        group = [v for v in train if v["cls"] == cls and v["pitch"] == pitch]
+        items = [(f'{v["setting"]}_{v["frame"]}', v["cloud"]) for v in group]
+        out, _ = fuse_class_views(cls, items, up_sensor=view_up(group[0], signs))
         fused += [(cls, vid, c) for vid, c in out]
     return build_database(fused, folder_classes(fused, {}, Path("classes.json")), voxel_leaf_m="auto",
                           normal_radius_m="auto", seed=0)
 
 
-def leave_one_setting_out(views: list[dict]) -> list[dict]:
+def leave_one_setting_out(views: list[dict], signs: dict | None = None) -> list[dict]:
     rows = []
     for setting in sorted({v["setting"] for v in views}):
         train = [v for v in views if v["setting"] != setting]
         test = [v for v in views if v["setting"] == setting]
         t0 = time.perf_counter()
-        db = fused_database(train)
+        db = fused_database(train, signs)
         t_db = time.perf_counter() - t0
         for desc in ("esf", "esf+vfh"):
             for mode, directions in (("plain", False), ("viewpoint", True)):
@@ -100,19 +207,22 @@ def leave_one_setting_out(views: list[dict]) -> list[dict]:
     return rows
 
 
-def pairs(views: list[dict], baseline: bool) -> list[dict]:
+def pairs(views: list[dict], baseline: bool, signs: dict | None = None) -> list[dict]:
+    """Every ordered pair of views of one class at one camera pitch (any yaw step, any distance): the upright
+    registration about that pitch's up direction against the rotation of the nominal yaw step about it."""
     rows = []
     for a in views:
         for b in views:
-            if a is b or a["cls"] != b["cls"]:
+            if a is b or a["cls"] != b["cls"] or a["pitch"] != b["pitch"]:
                 continue
             step = b["yaw"] - a["yaw"]
-            R_true = rot_about_camera_vertical(step)
+            up = view_up(a, signs)
+            R_true = rot_about_up(up, step)
             t0 = time.perf_counter()
-            res = align_upright(a["cloud"], b["cloud"], up_source=UP_CAMERA, up_target=UP_CAMERA)
+            res = align_upright(a["cloud"], b["cloud"], up_source=up, up_target=up)
             dt = time.perf_counter() - t0
             R = np.asarray(res.T_target_source.matrix)[:3, :3]
-            row = {"cls": a["cls"], "a": f'{a["yaw"]}/{a["frame"]}', "b": f'{b["yaw"]}/{b["frame"]}', "step": step,
+            row = {"cls": a["cls"], "pitch": a["pitch"], "ya": a["yaw"], "yb": b["yaw"], "step": step,
                    "err_deg": angle_deg(R.T @ R_true), "reliable": res.extras["reliable"],
                    "ambiguous": res.extras["ambiguous"], "yaw_sigma_deg": res.extras["yaw_sigma_deg"], "s": dt}
             if baseline:
@@ -127,13 +237,19 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "real" / "valves")
     ap.add_argument("--baseline", action="store_true", help="also run the 6-DoF feature registration")
+    ap.add_argument("--max-frames", type=int, default=None, help="frames per setting (default: all)")
+    ap.add_argument("--skip-loso", action="store_true", help="only the relative rotations")
     args = ap.parse_args()
-    views = load_views(args.data)
+    views = load_views(args.data, args.max_frames)
     print(f"{len(views)} views from {args.data}\n")
+    signs = pitch_signs(views)
+    for (cls, pitch), (sign, how) in sorted(signs.items()):
+        print(f"- {cls}, pitch {pitch}: up in the camera frame {np.round(up_camera(pitch, sign), 3).tolist()} ({how})")
+    print()
     print("## Leave one setting out (fused databases of the other settings)\n")
     print("| held-out setting | descriptor | calibration | views | accepted, right class | threshold | ms/view | db build s |")
     print("|---|---|---|---:|---:|---:|---:|---:|")
-    loso = leave_one_setting_out(views)
+    loso = [] if args.skip_loso else leave_one_setting_out(views, signs)
     for r in loso:
         print(f"| {r['setting']} | {r['desc']} | {r['mode']} | {r['n']} | {r['accepted_correct']} | {r['threshold']:.3f} | "
               f"{r['ms_per_view']:.0f} | {r['db_s']:.1f} |")
@@ -142,20 +258,21 @@ def main() -> int:
         for mode in ("plain", "viewpoint"):
             rs = [r for r in loso if r["mode"] == mode and r["desc"] == desc]
             n_ok, n = sum(r["accepted_correct"] for r in rs), sum(r["n"] for r in rs)
+            if not n:
+                continue
             print(f"{desc}, {mode} calibration: {n_ok}/{n} ({100 * n_ok / n:.0f} %) accepted with the right class")
-    print("\n## Relative rotation of view pairs (upright registration, up = -y)\n")
-    rows = pairs(views, args.baseline)
+    print("\n## Relative rotation of view pairs at one camera pitch (upright registration about the rig's vertical)\n")
+    rows = pairs(views, args.baseline, signs)
     groups: dict = {}
     for r in rows:
-        ya, yb = int(r["a"].split("/")[0]), int(r["b"].split("/")[0])
-        groups.setdefault((r["cls"], min(ya, yb), max(ya, yb)), []).append(r)
-    head = "| class | settings | nominal step | pairs | within 10 deg | median error deg | reliable | reliable > 30 deg |"
+        groups.setdefault((r["cls"], r["pitch"], min(r["ya"], r["yb"]), max(r["ya"], r["yb"])), []).append(r)
+    head = "| class | pitch | yaw settings | nominal step | pairs | within 10 deg | median error deg | reliable | reliable > 30 deg |"
     head += " feature reg. within 10 deg | feature reg. reliable | reliable > 30 deg |" if args.baseline else ""
     print(head)
-    print("|---|---|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if args.baseline else ""))
-    for (cls, ya, yb), rs in sorted(groups.items()):
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if args.baseline else ""))
+    for (cls, pitch, ya, yb), rs in sorted(groups.items()):
         e = np.array([r["err_deg"] for r in rs])
-        line = (f"| {cls} | yaw {ya} / {yb} | {yb - ya} | {len(rs)} | {int((e <= 10).sum())} | {np.median(e):.1f} | "
+        line = (f"| {cls} | {pitch} | {ya} / {yb} | {yb - ya} | {len(rs)} | {int((e <= 10).sum())} | {np.median(e):.1f} | "
                 f"{sum(r['reliable'] for r in rs)} | {sum(r['reliable'] and r['err_deg'] > 30 for r in rs)} |")
         if args.baseline:
             line += (f" {sum(r['baseline_err_deg'] <= 10 for r in rs)} | {sum(r['baseline_reliable'] for r in rs)} |"
