@@ -9,8 +9,10 @@ Sensor poses come from ``CLASS/poses.csv`` when present (:func:`read_poses_csv`:
 sensor pose ``T_object_sensor`` in any frame fixed to the object -- a rig, a world frame), or are estimated:
 the views are taken in name order and each is registered onto the union of those already placed, with the
 gravity-aligned registration (:func:`~semslam.registration.align_upright`) when the sensors' up direction
-is given (``up_sensor``), else the 6-DoF feature registration. Either way each view is then refined onto the
-union of the others by point-to-plane ICP (4-DoF about up when it is known), ``refine_rounds`` times.
+is given (``up_sensor``: one direction for every view, or one per view -- a camera pitched differently from
+view to view, a vehicle's attitude -- from ``CLASS/up.csv``, :func:`read_up_csv`), else the 6-DoF feature
+registration. Either way each view is then refined onto the union of the others by point-to-plane ICP (4-DoF
+about up when it is known), ``refine_rounds`` times.
 
 The object frame is the first view's sensor frame (or the poses' frame), moved to the centre of the fused
 model's bounding box. Every fused view keeps its sensor origin as ``viewpoint_xyz_m``.
@@ -32,10 +34,13 @@ from ..geometry import RigidTransform, rotation_from_quat_wxyz
 from ..registration import align_icp, align_upright, register
 from ..registration._upright_kernels import point_to_plane_4dof, target_normals
 
-__all__ = ["FusionReport", "fuse_class_views", "read_poses_csv"]
+__all__ = ["FusionReport", "fuse_class_views", "read_poses_csv", "read_up_csv"]
 
 _QUAT_COLUMNS = ("view", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
 _MATRIX_COLUMNS = ("view",) + tuple(f"t{r}{c}" for r in range(4) for c in range(4))
+_UP_COLUMNS = ("view", "x", "y", "z")
+#: size cap of a poses.csv / up.csv (a row per view: far more than any class has)
+MAX_CSV_BYTES = 16 << 20
 #: rotation tolerance of a poses.csv matrix (max |R^T R - I|, |det R - 1|)
 ROTATION_TOLERANCE = 1e-3
 
@@ -65,45 +70,79 @@ def read_poses_csv(path: str | Path, view_ids: Sequence[str]) -> dict[str, np.nd
     :class:`~semslam.errors.DatabaseError` naming the file and the row for a missing or unknown view, a
     non-number, a quaternion that is not unit length, or a matrix that is not a rigid transform.
     """
+    where = str(path)
+    header, rows = _read_view_rows(path, "poses", (_QUAT_COLUMNS, _MATRIX_COLUMNS),
+                                   f"{','.join(_QUAT_COLUMNS)} or view,t00,...,t33", view_ids, "its sensor pose")
+    return {view: _pose_from_values(values, header == _QUAT_COLUMNS, f"line {lineno} of the poses file {where!r} "
+                                    f"(view {view!r})") for view, (lineno, values) in rows.items()}
+
+
+def read_up_csv(path: str | Path, view_ids: Sequence[str]) -> dict[str, np.ndarray]:
+    """The up direction of every view in its own sensor frame (unit vector) from a CSV file with the header
+    ``view,x,y,z`` (any length; ``view`` is the file's stem): for views whose sensors were not all held the same
+    way (a camera pitched differently from view to view, a vehicle's attitude). Raises
+    :class:`~semslam.errors.DatabaseError` naming the file and the row for a missing or unknown view, a
+    non-number, or a zero direction."""
+    where = str(path)
+    _, rows = _read_view_rows(path, "up", (_UP_COLUMNS,), ",".join(_UP_COLUMNS), view_ids, "its up direction")
+    ups = {}
+    for view, (lineno, values) in rows.items():
+        scale = np.abs(values).max()
+        if not scale > 0:
+            raise DatabaseError(f"Line {lineno} of the up file {where!r} (view {view!r}) gives a zero direction; "
+                                f"expected the sensor's up, e.g. 0,-1,0 for a level camera with y down.")
+        u = values / scale
+        ups[view] = u / np.linalg.norm(u)
+    return ups
+
+
+def _read_view_rows(path: str | Path, what: str, headers: tuple, expected: str, view_ids: Sequence[str],
+                    needs: str) -> tuple[tuple, dict[str, tuple[int, np.ndarray]]]:
+    """``(header, {view: (line number, finite float values)})`` of a per-view CSV file, one row for every view
+    in ``view_ids`` and no other; a regular file of at most :data:`MAX_CSV_BYTES`."""
     path = Path(path)
     where = str(path)
+    if not path.is_file():
+        raise DatabaseError(f"The {what} file {where!r} is not a regular file.")
+    if path.stat().st_size > MAX_CSV_BYTES:
+        raise DatabaseError(f"The {what} file {where!r} must be at most {MAX_CSV_BYTES} bytes. "
+                            f"Got {path.stat().st_size} instead.")
     try:
         with path.open(newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatabaseError(f"Cannot read the poses file {where!r}: {exc}.") from None
-    if not rows:
-        raise DatabaseError(f"The poses file {where!r} is empty; expected a header {','.join(_QUAT_COLUMNS)}.")
-    header = tuple(c.strip() for c in rows[0])
-    if header not in (_QUAT_COLUMNS, _MATRIX_COLUMNS):
-        raise DatabaseError(f"The poses file {where!r} must start with the header {','.join(_QUAT_COLUMNS)} "
-                            f"or view,t00,...,t33. Got {','.join(header)!r} instead.")
-    poses: dict[str, np.ndarray] = {}
-    for lineno, row in enumerate(rows[1:], start=2):
+            lines = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DatabaseError(f"Cannot read the {what} file {where!r}: {exc}.") from None
+    if not lines:
+        raise DatabaseError(f"The {what} file {where!r} is empty; expected a header {expected}.")
+    header = tuple(c.strip() for c in lines[0])
+    if header not in headers:
+        raise DatabaseError(f"The {what} file {where!r} must start with the header {expected}. "
+                            f"Got {','.join(header)!r} instead.")
+    rows: dict[str, tuple[int, np.ndarray]] = {}
+    for lineno, row in enumerate(lines[1:], start=2):
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) != len(header):
-            raise DatabaseError(f"Line {lineno} of the poses file {where!r} has {len(row)} fields; expected {len(header)}.")
+            raise DatabaseError(f"Line {lineno} of the {what} file {where!r} has {len(row)} fields; expected {len(header)}.")
         view = row[0].strip()
         try:
             values = np.array([float(v) for v in row[1:]])
         except ValueError:
-            raise DatabaseError(f"Line {lineno} of the poses file {where!r} (view {view!r}) holds a value that is "
+            raise DatabaseError(f"Line {lineno} of the {what} file {where!r} (view {view!r}) holds a value that is "
                                 f"not a number: {row[1:]}.") from None
         if not np.all(np.isfinite(values)):
-            raise DatabaseError(f"Line {lineno} of the poses file {where!r} (view {view!r}) holds NaN or infinity.")
-        if view in poses:
-            raise DatabaseError(f"The poses file {where!r} gives view {view!r} twice (line {lineno}).")
-        poses[view] = _pose_from_values(values, header == _QUAT_COLUMNS,
-                                        f"line {lineno} of the poses file {where!r} (view {view!r})")
-    missing = [v for v in view_ids if v not in poses]
+            raise DatabaseError(f"Line {lineno} of the {what} file {where!r} (view {view!r}) holds NaN or infinity.")
+        if view in rows:
+            raise DatabaseError(f"The {what} file {where!r} gives view {view!r} twice (line {lineno}).")
+        rows[view] = (lineno, values)
+    missing = [v for v in view_ids if v not in rows]
     if missing:
-        raise DatabaseError(f"The poses file {where!r} has no row for the view(s) {', '.join(missing)}; "
-                            f"every view of the class needs its sensor pose.")
-    unknown = sorted(set(poses) - set(view_ids))
+        raise DatabaseError(f"The {what} file {where!r} has no row for the view(s) {', '.join(missing)}; "
+                            f"every view of the class needs {needs}.")
+    unknown = sorted(set(rows) - set(view_ids))
     if unknown:
-        raise DatabaseError(f"The poses file {where!r} names view(s) {', '.join(unknown)} that are not in its folder.")
-    return poses
+        raise DatabaseError(f"The {what} file {where!r} names view(s) {', '.join(unknown)} that are not in its folder.")
+    return header, rows
 
 
 def _pose_from_values(values: np.ndarray, quaternion: bool, where: str) -> np.ndarray:
@@ -130,21 +169,23 @@ def fuse_class_views(label: str, clouds: Sequence[tuple[str, PointCloud]], *, po
 
     Returns ``[(view_id, cloud in the object frame with its viewpoint), ...]`` in the input order and a
     :class:`FusionReport`. ``poses``: ``{view_id: T_object_sensor}`` for every view, else estimated.
+    ``up_sensor``: the up direction in the sensors' frame, one (3,) for every view or ``{view_id: (3,)}``.
     """
     ids = [v for v, _ in clouds]
     pts = [np.asarray(c.points_xyz_m, dtype=float) for _, c in clouds]
-    up = None if up_sensor is None else np.asarray(up_sensor, dtype=float) / np.linalg.norm(up_sensor)
+    ups = _view_ups(up_sensor, ids, label)
     if poses is not None:
         Ts = [np.asarray(poses[v], dtype=float) for v in ids]
         source = "poses.csv"
     else:
-        Ts = _estimate(pts, up, seed, label, ids)
-        source = "estimated (upright registration)" if up is not None else "estimated (feature registration)"
+        Ts = _estimate(pts, ups, seed, label, ids)
+        source = "estimated (upright registration)" if ups is not None else "estimated (feature registration)"
     report = FusionReport(label, source)
+    up_object = None if ups is None else _mean_direction([T[:3, :3] @ u for T, u in zip(Ts, ups)])
     for _ in range(refine_rounds if len(pts) > 1 else 0):
         for i in range(len(pts)):
             others = np.concatenate([_apply(Ts[j], pts[j]) for j in range(len(pts)) if j != i])
-            Ts[i] = _refine(pts[i], others, Ts[i], up)
+            Ts[i] = _refine(pts[i], others, Ts[i], up_object)
     for i in range(len(pts)):
         if len(pts) == 1:
             break
@@ -156,9 +197,8 @@ def fuse_class_views(label: str, clouds: Sequence[tuple[str, PointCloud]], *, po
         report.rms_m[ids[i]] = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("nan")
         if inl.mean() < 0.3:
             report.doubtful.append(ids[i])
-    if up is not None:  # the up direction in the object frame: the sensors' up turned by their poses, averaged
-        ups = np.array([T[:3, :3] @ up for T in Ts]).mean(axis=0)
-        report.up_object = (ups / np.linalg.norm(ups)).tolist()
+    if ups is not None:  # the up direction in the object frame: the sensors' up turned by their poses, averaged
+        report.up_object = _mean_direction([T[:3, :3] @ u for T, u in zip(Ts, ups)]).tolist()
     fused = np.concatenate([_apply(T, p) for T, p in zip(Ts, pts)])
     centre = 0.5 * (fused.min(axis=0) + fused.max(axis=0))
     out = []
@@ -178,14 +218,41 @@ def _spacing(p: np.ndarray) -> float:
     return float(np.median(cKDTree(p).query(p, 2)[0][:, 1]))
 
 
-def _estimate(pts: list, up: np.ndarray | None, seed: int, label: str, ids: list) -> list:
-    """Sensor poses in the first view's frame: each view registered onto the union of those before it."""
+def _view_ups(up_sensor: Any, ids: list, label: str) -> list | None:
+    """One unit up direction per view (sensor frame), or None."""
+    if up_sensor is None:
+        return None
+    if isinstance(up_sensor, dict):
+        missing = [v for v in ids if v not in up_sensor]
+        if missing:
+            raise DatabaseError(f"No up direction for the view(s) {', '.join(missing)} of class {label!r}.")
+        raw = [np.asarray(up_sensor[v], dtype=float) for v in ids]
+    else:
+        raw = [np.asarray(up_sensor, dtype=float)] * len(ids)
+    out = []
+    for v, u in zip(ids, raw):
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or not np.abs(u).max() > 0:
+            raise DatabaseError(f"The up direction of view {v!r} of class {label!r} must be 3 finite numbers, not all "
+                                f"zero. Got {u.tolist()} instead.")
+        u = u / np.abs(u).max()
+        out.append(u / np.linalg.norm(u))
+    return out
+
+
+def _mean_direction(vectors: list) -> np.ndarray:
+    m = np.mean(vectors, axis=0)
+    return m / np.linalg.norm(m)
+
+
+def _estimate(pts: list, ups: list | None, seed: int, label: str, ids: list) -> list:
+    """Sensor poses in the first view's frame: each view registered onto the union of those before it (about
+    the first view's up when the ups are known: each view's own up is turned onto it)."""
     Ts = [np.eye(4)]
     for i in range(1, len(pts)):
         model = np.concatenate([_apply(T, p) for T, p in zip(Ts, pts[:i])])
         try:
-            if up is not None:
-                res = align_upright(pts[i], model, up_source=up, up_target=up)
+            if ups is not None:
+                res = align_upright(pts[i], model, up_source=ups[i], up_target=ups[0])
             else:
                 res = register(pts[i], model, seed=seed)
         except RegistrationError as exc:
@@ -195,7 +262,8 @@ def _estimate(pts: list, up: np.ndarray | None, seed: int, label: str, ids: list
 
 
 def _refine(p: np.ndarray, model: np.ndarray, T: np.ndarray, up: np.ndarray | None) -> np.ndarray:
-    """``T`` refined by point-to-plane ICP of ``p`` onto ``model`` (yaw about ``up`` + translation if given)."""
+    """``T`` refined by point-to-plane ICP of ``p`` onto ``model`` (yaw about ``up``, a direction in the object
+    frame, + translation if given)."""
     mc = 3.0 * _spacing(model)
     if up is None:
         res = align_icp(p, model, init_T=RigidTransform(T), method="plane", max_correspondence_m=mc, max_iterations=30)
@@ -228,8 +296,9 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
         items = [(vid, c) for lab, vid, c in views if lab == label]
         poses_path = root / label / "poses.csv"
         poses = read_poses_csv(poses_path, [vid for vid, _ in items]) if poses_path.exists() else None
-        out, rep = fuse_class_views(label, items, poses=poses, up_sensor=up_sensor, refine_rounds=refine_rounds,
-                                    seed=seed)
+        up_path = root / label / "up.csv"
+        ups = read_up_csv(up_path, [vid for vid, _ in items]) if up_path.exists() else up_sensor
+        out, rep = fuse_class_views(label, items, poses=poses, up_sensor=ups, refine_rounds=refine_rounds, seed=seed)
         fused += [(label, vid, c) for vid, c in out]
         reports[label] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object,
                           "median_rms_m": float(np.nanmedian(list(rep.rms_m.values()))) if rep.rms_m else None}
