@@ -8,7 +8,7 @@ dataset's ``CLASS/pitchPPP/pitchPPPyawYYY/DDcm/N/`` layout is read too), cleaned
 geometry). Two tables:
 
 1. **Leave one setting out.** For each rig setting, a database is built from the other settings' views
-   (fused per class and camera pitch with the gravity-aligned registration, up = :func:`up_camera`) and the
+   (fused per class with the gravity-aligned registration, each view about its camera's up: :func:`up_camera`) and the
    held-out setting's views of both classes are recognised (ESF and ESF+VFH, chi-square nearest view,
    global rejection). ``plain`` calibrates the rejection threshold by ordinary leave-one-out, ``viewpoint`` leaves
    one viewpoint out (:mod:`semslam.recognition.rejection`). Goal: >= 90 % accepted with the right class.
@@ -171,13 +171,14 @@ def view_up(v: dict, signs: dict | None = None) -> np.ndarray:
 
 
 def fused_database(train: list[dict], signs: dict | None = None):
-    """ESF/VFH database of the training views, fused per class and camera pitch (each pitch has its own up
-    direction; the descriptors do not depend on the object frame, so one class may have several)."""
+    """ESF/VFH database of the training views, fused per class into one object frame, each view about its own
+    camera's up (the settings' pitches differ)."""
     fused = []
-    for cls, pitch in sorted({(v["cls"], v["pitch"]) for v in train}):
-        group = [v for v in train if v["cls"] == cls and v["pitch"] == pitch]
-        items = [(f'{v["setting"]}_{v["frame"]}', v["cloud"]) for v in group]
-        out, _ = fuse_class_views(cls, items, up_sensor=view_up(group[0], signs))
+    for cls in sorted({v["cls"] for v in train}):
+        group = [v for v in train if v["cls"] == cls]
+        ids = [f'{v["setting"]}_{v["frame"]}' for v in group]
+        out, _ = fuse_class_views(cls, list(zip(ids, [v["cloud"] for v in group])),
+                                  up_sensor={vid: view_up(v, signs) for vid, v in zip(ids, group)})
         fused += [(cls, vid, c) for vid, c in out]
     return build_database(fused, folder_classes(fused, {}, Path("classes.json")), voxel_leaf_m="auto",
                           normal_radius_m="auto", seed=0)
