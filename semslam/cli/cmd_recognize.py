@@ -53,6 +53,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--up", type=parse_direction, default=None, metavar="X,Y,Z",
                         help="up direction in the scan's frame (0,-1,0 for a level camera, y down): classes whose "
                              "database records their up (db build --fuse --up) are posed upright, no half-turn flips")
+    parser.add_argument("--attached", action="store_true",
+                        help="find objects attached to structure: in clusters too big for any class (a valve and "
+                             "the pipe it is mounted on), remove the pipe (cylinders) and recognise the rest "
+                             "(PipelineConfig.attached; an [attached] table in --config sets its fields)")
     parser.add_argument("--config", help="TOML or JSON file of PipelineConfig fields (a [pipeline] table, or the "
                                          "fields at the top); --descriptor/--classifier/--no-pose override it")
     parser.set_defaults(func=run)
@@ -168,6 +172,8 @@ def run(args: argparse.Namespace) -> int:
         raw["up_scanner"] = list(args.up)
     if args.reject_margin is not None:
         raw["reject_margin"] = args.reject_margin
+    if args.attached and raw.get("attached") is None:
+        raw["attached"] = {}
     raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
     config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "one of the options")
     t0 = time.perf_counter()

@@ -35,6 +35,7 @@ from ..recognition import (
 from ..recognition.plausibility import border_touched, principal_extent
 from ..registration.pose import PoseConfig, PoseModel, estimate_object_pose, prepare_pose_model
 from ..segmentation.scene import SegmentationConfig, SegmentationResult, segment_scene
+from .attached import AttachedConfig, find_attached
 from .parts import PartsConfig, merge_parts
 from ._scan_helpers import (
     ClusterOutcome,
@@ -135,6 +136,10 @@ class PipelineConfig:
         Part-based hypotheses (:mod:`semslam.pipeline.parts`): unknown clusters close to each other are tried as
         one object (a valve's handwheel seen apart from its body) and kept when the union is recognised, passes
         verification and every part fits the pose. Off (None) by default; needs ``verify_min_fitness``.
+    attached : AttachedConfig or None
+        Objects attached to structure (:mod:`semslam.pipeline.attached`): in the clusters rejected as too big or
+        cut by the border, the structure (a pipe, a post) is removed primitive by primitive and the rest is
+        recognised. Off (None) by default.
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -157,6 +162,7 @@ class PipelineConfig:
     verify_max_visibility: float | None = None
     verify_visibility_image: str = "cluster"
     parts: PartsConfig | None = None
+    attached: AttachedConfig | None = None
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
@@ -174,6 +180,9 @@ class PipelineConfig:
             raise InputError(f"The 'parts' argument of {c} must be a PartsConfig, with verify_min_fitness set (a union "
                              f"is kept only if its pose verifies). Got parts={self.parts!r}, "
                              f"verify_min_fitness={self.verify_min_fitness!r} instead.")
+        if self.attached is not None and not isinstance(self.attached, AttachedConfig):
+            raise InputError(f"The 'attached' argument of {c} must be an AttachedConfig or None. "
+                             f"Got {type(self.attached).__name__} instead.")
         if self.up_scanner is not None:
             from .._validation import as_float_array
 
@@ -205,6 +214,7 @@ class PipelineConfig:
         d["segmentation"] = self.segmentation.to_dict()
         d["pose"] = self.pose.to_dict()
         d["parts"] = None if self.parts is None else self.parts.to_dict()
+        d["attached"] = None if self.attached is None else self.attached.to_dict()
         return d
 
     @classmethod
@@ -237,6 +247,8 @@ class PipelineConfig:
             d["pose"] = build(PoseConfig, d["pose"], f"the 'pose' table of {source}")
         if d.get("parts") is not None:
             d["parts"] = build(PartsConfig, d["parts"], f"the 'parts' table of {source}")
+        if d.get("attached") is not None:
+            d["attached"] = build(AttachedConfig, d["attached"], f"the 'attached' table of {source}")
         return build(cls, d, source)
 
 
@@ -443,6 +455,9 @@ class ScanRecognizer:
                 reason += ", touches the scan border"
             outcomes.append(ClusterOutcome(k, cluster.n_points, label, match.nearest_label, match.distance,
                                            match.threshold, det, reason, **common))
+        if cfg.attached is not None:  # objects inside clusters too big for them (attached to structure)
+            find_attached(self, scan, seg, outcomes, detections, seed=int(seeds[1]) + 7919, stamps=stamps,
+                          stamp_s=stamp_s, scan_id=scan_id, timings=timings)
         if cfg.parts is not None:  # unknown clusters near each other tried as one object
             merge_parts(self, scan, seg, outcomes, detections, seed=int(seeds[1]) + len(seg.clusters), stamps=stamps,
                         stamp_s=stamp_s, scan_id=scan_id, timings=timings)
