@@ -25,6 +25,12 @@ cluster with the rig's pipe); the valve's centroid error is then that of the pie
 the label column says "(inside the cluster)". ``--attached-far`` also searches the clusters rejected by their
 descriptor distance.
     .venv/bin/python benchmarks/real_valves_frames.py --db loso-fused --up 0,-1,0 --reject-margin 1 --attached
+
+Other settings of the rig (camera pitch 30/45, other yaw steps and distances; the original dataset's
+``CLASS/pitchPPP/pitchPPPyawYYY/DDcm/N/`` layout is read too): ``--up auto`` gives each setting the rig's vertical
+as its pitched camera sees it (``real_valves.up_camera``, sign measured from the backboard), for the fused
+database (each view about its own up) and for the pose search of its frames.
+    .venv/bin/python benchmarks/real_valves_frames.py --db loso-fused --up auto --reject-margin 1 --attached
 """
 
 from __future__ import annotations
@@ -47,12 +53,39 @@ FOUND_CENTROID_MM = 20.0
 COVER_RADIUS_M = 0.005
 
 
+def frame_key(data: Path, path: Path) -> tuple[str, str, str]:
+    """``(class, setting, frame)`` of a file ``data/CLASS/<setting path>/N/NAME``: the shared layout
+    (``pitch000_yaw030_30cm``) or the original dataset's (``pitch030/pitch030yaw-015/30cm``)."""
+    parts = path.relative_to(data).parts
+    return parts[0], "/".join(parts[1:-2]), parts[-2]
+
+
+def setting_ups(data: Path) -> dict:
+    """``{setting: up in the camera frame}`` for ``--up auto``: the rig's vertical as a camera pitched by the
+    setting's pitch sees it (:func:`real_valves.up_camera`, its sign measured by :func:`real_valves.pitch_signs`,
+    the majority over the classes)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    import real_valves as rv
+
+    views = []
+    for path in sorted(data.glob("*/**/RANSAC.pcd")):
+        cls, setting, frame = frame_key(data, path)
+        pitch, yaw, _ = rv.parse_setting(setting)
+        views.append({"cls": cls, "setting": setting, "pitch": pitch, "yaw": yaw, "path": path})
+    signs = rv.pitch_signs(views)
+    out = {}
+    for v in views:
+        votes = [s for (c, p), (s, _) in signs.items() if p == v["pitch"]]
+        out[v["setting"]] = tuple(rv.up_camera(v["pitch"], 1 if sum(votes) >= 0 else -1))
+    return out
+
+
 def shared_valves() -> Path:
     shared = Path(os.environ.get("SEMSLAM_SHARED", ROOT.parent / "shared"))
     return shared / "data" / "real" / "valves"
 
 
-def frame_config(args: argparse.Namespace):
+def frame_config(args: argparse.Namespace, up=None):
     from semslam.pipeline import PipelineConfig
 
     seg = {"drop_origin": True, "max_range_m": args.max_range, "voxel_leaf_m": "auto",
@@ -62,8 +95,8 @@ def frame_config(args: argparse.Namespace):
         table["reject_margin"] = args.reject_margin
     if getattr(args, "descriptor", None):
         table["descriptor"] = args.descriptor
-    if getattr(args, "up", None):
-        table["up_scanner"] = [float(v) for v in args.up.split(",")]
+    if up is not None:
+        table["up_scanner"] = [float(v) for v in up]
     if getattr(args, "attached", False):
         table["attached"] = {"include_far": bool(getattr(args, "attached_far", False))}
     return PipelineConfig.from_dict(table)
@@ -82,10 +115,10 @@ def valve_cluster(result, ransac_xyz_m: np.ndarray):
     return best
 
 
-def run_frame(recognizer, path: Path, seed: int) -> dict:
+def run_frame(recognizer, path: Path, seed: int, data: Path) -> dict:
     from semslam.io import read_point_cloud
 
-    truth_class = path.parts[-4]
+    truth_class, setting, frame = frame_key(data, path)
     scan = read_point_cloud(path)
     ransac = read_point_cloud(path.with_name("RANSAC.pcd")).points_xyz_m[:-DRAWN_TAIL]
     centre = ransac.mean(axis=0)
@@ -93,7 +126,7 @@ def run_frame(recognizer, path: Path, seed: int) -> dict:
     result = recognizer.recognize(scan, seed=seed)
     dt_ms = (time.perf_counter() - t0) * 1e3
     outcome, pts, cover = valve_cluster(result, ransac)
-    row = {"class": truth_class, "setting": path.parts[-3], "frame": path.parts[-2], "n_points": scan.n_points,
+    row = {"class": truth_class, "setting": setting, "frame": frame, "n_points": scan.n_points,
            "time_ms": dt_ms, "spacing_mm": 1e3 * (result.segmentation.resolved.get("spacing_m") or float("nan")),
            "cover": cover, "label": "-", "detected": False, "right_class": False, "distance": float("nan"),
            "centroid_err_mm": float("nan"), "reason": "no cluster holds the valve", "pose": None,
@@ -181,8 +214,8 @@ def loso_database(data: Path, held_out: str):
     from semslam.symmetry import Symmetry
 
     views, extent = [], {}
-    for path in sorted(data.glob("*/*/*/RANSAC.pcd")):
-        cls, setting, frame = path.parts[-4:-1]
+    for path in sorted(data.glob("*/**/RANSAC.pcd")):
+        cls, setting, frame = frame_key(data, path)
         if setting == held_out:
             continue
         pts = read_point_cloud(path).points_xyz_m[:-DRAWN_TAIL]
@@ -195,20 +228,24 @@ def loso_database(data: Path, held_out: str):
 
 
 def loso_fused_database(data: Path, held_out: str, up):
-    """The views of every setting but ``held_out``, cleaned and fused per class (``db build --fuse --up``)."""
+    """The views of every setting but ``held_out``, cleaned and fused per class (``db build --fuse --up``;
+    ``up``: one direction, None, or ``{setting: direction}`` -- each view about its own setting's up)."""
     from semslam.io import read_point_cloud
     from semslam.pipeline.fuse import fuse_class_views
     from semslam.recognition.database import build_database, folder_classes
     from semslam.segmentation.clean import clean_view
 
     items: dict = {}
-    for path in sorted(data.glob("*/*/*/RANSAC.pcd")):
-        cls, setting, frame = path.parts[-4:-1]
+    ups: dict = {}
+    for path in sorted(data.glob("*/**/RANSAC.pcd")):
+        cls, setting, frame = frame_key(data, path)
         if setting != held_out:
             items.setdefault(cls, []).append((f"{setting}_{frame}", clean_view(read_point_cloud(path))[0]))
+            ups[f"{setting}_{frame}"] = up.get(setting) if isinstance(up, dict) else up
     fused, fusion = [], {}
     for cls, views in sorted(items.items()):
-        out, rep = fuse_class_views(cls, views, up_sensor=up)
+        per_view = {vid: ups[vid] for vid, _ in views}
+        out, rep = fuse_class_views(cls, views, up_sensor=per_view if isinstance(up, dict) else up)
         fused += [(cls, vid, c) for vid, c in out]
         fusion[cls] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object}
     db = build_database(fused, folder_classes(fused, {}, Path("classes.json")), normal_radius_m="auto",
@@ -225,7 +262,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="PipelineConfig.reject_margin (default: the pipeline's, 6, set for laser clusters against "
                          "Kinect views; a database of the same camera's views needs less)")
     ap.add_argument("--descriptor", choices=("esf", "vfh", "esf+vfh"), default=None)
-    ap.add_argument("--up", default=None, help="up in the camera frame, e.g. 0,-1,0: pose kept upright")
+    ap.add_argument("--up", default=None, help="up in the camera frame, e.g. 0,-1,0: pose kept upright; 'auto': "
+                                               "each setting's from its camera pitch (pitchPPP in its name)")
     ap.add_argument("--data", default=None, help="the valves folder (default: ../shared/data/real/valves)")
     ap.add_argument("--max-range", type=float, default=0.5)
     ap.add_argument("--max-planes", type=int, default=0)
@@ -243,23 +281,34 @@ def main(argv: list[str] | None = None) -> int:
     from semslam.recognition import load_database
 
     data = Path(args.data) if args.data else shared_valves()
-    frames = sorted(data.glob("*/*/*/Captured_Frame.pcd"))
+    frames = sorted(data.glob("*/**/Captured_Frame.pcd"))
     if not frames:
         print(f"no valves/CLASS/SETTING/N/Captured_Frame.pcd under {data}", file=sys.stderr)
         return 1
-    up = None if args.up is None else tuple(float(v) for v in args.up.split(","))
-    if args.db in ("loso", "loso-fused"):
-        rows = []
-        for setting in sorted({f.parts[-3] for f in frames}):
-            db = loso_database(data, setting) if args.db == "loso" else loso_fused_database(data, setting, up)
-            recognizer = ScanRecognizer(db, frame_config(args))
-            recognizer.warm_up()
-            rows += [run_frame(recognizer, f, args.seed) for f in frames if f.parts[-3] == setting]
-        rows.sort(key=lambda r: (r["class"], r["setting"], r["frame"]))
+    if args.up == "auto":
+        up = setting_ups(data)
+        print("up per setting: " + ", ".join(f"{k} {np.round(v, 3).tolist()}" for k, v in sorted(up.items())))
     else:
-        recognizer = ScanRecognizer(load_database(args.db), frame_config(args))
-        recognizer.warm_up()
-        rows = [run_frame(recognizer, f, args.seed) for f in frames]
+        up = None if args.up is None else tuple(float(v) for v in args.up.split(","))
+
+    def config_for(setting: str):
+        return frame_config(args, up[setting] if isinstance(up, dict) else up)
+
+    settings = sorted({frame_key(data, f)[1] for f in frames})
+    rows = []
+    if args.db in ("loso", "loso-fused"):
+        for setting in settings:
+            db = loso_database(data, setting) if args.db == "loso" else loso_fused_database(data, setting, up)
+            recognizer = ScanRecognizer(db, config_for(setting))
+            recognizer.warm_up()
+            rows += [run_frame(recognizer, f, args.seed, data) for f in frames if frame_key(data, f)[1] == setting]
+    else:
+        db = load_database(args.db)
+        for setting in settings:
+            recognizer = ScanRecognizer(db, config_for(setting))
+            recognizer.warm_up()
+            rows += [run_frame(recognizer, f, args.seed, data) for f in frames if frame_key(data, f)[1] == setting]
+    rows.sort(key=lambda r: (r["class"], r["setting"], r["frame"]))
     cons = consistency(rows)
     print(f"db {args.db}; max range {args.max_range} m, voxel auto, cluster tolerance auto, max planes "
           f"{args.max_planes}, border {args.border}, pose model {args.pose_model}, up {args.up}, reject margin "

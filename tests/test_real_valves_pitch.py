@@ -118,3 +118,29 @@ def test_pitch_sign_is_measured_from_the_turning_backboard(rv, tmp_path, sign):
 def test_max_frames_keeps_the_first_frames_of_every_setting(rv):
     views = rv.load_views(SUBSET, max_frames=1)
     assert len(views) == 6 and {v["frame"] for v in views} == {"1"}
+
+
+def test_frames_benchmark_reads_the_original_layout_and_sets_up_per_setting(rv, tmp_path):
+    """``real_valves_frames.py --up auto``: every frame of the original dataset's deeper layout is found, keyed by
+    its whole setting path, and each setting gets its camera's up (sign measured from the backboard)."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import real_valves_frames as rvf
+    finally:
+        sys.path.remove(str(BENCH))
+    rng = np.random.default_rng(5)
+    up = rv.up_camera(45, -1)
+    view = PointCloud(rng.normal(0.0, 0.02, (300, 3)) + [0.0, 0.0, 0.3])
+    for yaw in (-45, 15):
+        d = tmp_path / "globe_valve" / "pitch045" / f"pitch045yaw{yaw:03d}" / "40cm" / "3"
+        d.mkdir(parents=True)
+        write_point_cloud(d / "RANSAC.pcd", view)
+        toward_camera = rv.rot_about_up(up, yaw) @ (camera_pitched_down(-45.0).T @ [0.0, 0.0, -1.0])
+        write_point_cloud(d / "Captured_Frame.pcd", _plane(toward_camera, 0.4, rng))
+    frames = sorted(tmp_path.glob("*/**/Captured_Frame.pcd"))
+    assert [rvf.frame_key(tmp_path, f) for f in frames] == [
+        ("globe_valve", "pitch045/pitch045yaw-45/40cm", "3"), ("globe_valve", "pitch045/pitch045yaw015/40cm", "3")]
+    ups = rvf.setting_ups(tmp_path)
+    assert set(ups) == {"pitch045/pitch045yaw-45/40cm", "pitch045/pitch045yaw015/40cm"}
+    for u in ups.values():
+        np.testing.assert_allclose(u, up, atol=1e-12)
