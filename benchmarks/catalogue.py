@@ -23,11 +23,20 @@ the visibility cost against the whole scan about the cluster (``verify_visibilit
 behind another object is hidden, one outside the scan's footprint unknown).
 The other settings' headline numbers are printed too, on the same missions.
 
+Database (``--db-sensor``): ``kinect`` (default) = Kinect-like survey views at 1.5 m, 12 azimuths x elevations
+45/60/75/85 deg; ``laser`` = views rendered by the missions' own laser scanner from route-like viewpoints
+(:mod:`semslam.simulation.laser_views`: altitude 1.4-1.6 m, cross-track offset up to 0.45 m, anywhere along the
+sweep, vehicle motion during the scan; ``--laser-views`` whole views per class, ``--laser-cut-views`` extra views
+the swath's border may cut); ``kinect+laser`` both. The pose-model views are the Kinect ones (0.7 m, 60 deg) in
+every case. ``--reject-margin`` overrides the settings' rejection margin (6, set for the Kinect-to-laser gap).
+
 Recall is counted per cluster (every cluster of a database object, including those cut by the scan border);
 also printed: recall over the clusters not cut by the border, and per object (found in at least one scan).
 
     .venv/bin/python benchmarks/catalogue.py [--quick] [--plot FILE] [--sweep noise,density,occlusion,combo,margin]
-                                             [--config catalogue|defaults] [--seed N]
+                                             [--config catalogue|defaults|...] [--seed N] [--compare all|A,B|'']
+                                             [--db-sensor kinect|laser|kinect+laser] [--reject-margin M]
+                                             [--descriptor esf|vfh|esf+vfh] [--records FILE.jsonl]
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig,
 from semslam.simulation.cad_models import models_view_clouds
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
+from semslam.simulation.laser_views import LaserViewConfig, laser_view_clouds
 from semslam.simulation.occlusion import occlude_objects
 from semslam.segmentation import SegmentationConfig
 
@@ -78,13 +88,31 @@ def subsets(labels: list[str], size: int = 4) -> list[list[str]]:
     return groups
 
 
-def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8):
-    """Survey views at each elevation (1.5 m, ``n_views`` azimuths each) + the pose-model views."""
+def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, *, sensor: str = "kinect",
+             laser_views: int = 48, laser_cut_views: int = 0, laser_config: LaserViewConfig | None = None):
+    """The recognition views + the pose-model views (Kinect, 0.7 m / 60 deg, as always).
+
+    ``sensor``: ``"kinect"`` survey views at each elevation (1.5 m, ``n_views`` azimuths each); ``"laser"`` views
+    rendered by the missions' laser scanner from route-like viewpoints (:mod:`semslam.simulation.laser_views`:
+    ``laser_views`` whole views per class, headings every 360 / laser_views degrees, plus ``laser_cut_views``
+    views that the swath's border may cut); ``"kinect+laser"`` both."""
+    if sensor not in ("kinect", "laser", "kinect+laser"):
+        raise ValueError(f"sensor must be kinect, laser or kinect+laser, got {sensor!r}")
     views, classes = [], None
-    for i, el in enumerate(elevations_deg):
-        cfg = dataclasses.replace(SURVEY_KINECT, elevation_rad=float(np.radians(el)))
-        v, classes = models_view_clouds(models, seed=seed + i, config=cfg, n_views=n_views)
-        views += [(lab, f"{vid}_el{el:g}", cloud) for lab, vid, cloud in v]
+    if "kinect" in sensor:
+        for i, el in enumerate(elevations_deg):
+            cfg = dataclasses.replace(SURVEY_KINECT, elevation_rad=float(np.radians(el)))
+            v, classes = models_view_clouds(models, seed=seed + i, config=cfg, n_views=n_views)
+            views += [(lab, f"{vid}_el{el:g}", cloud) for lab, vid, cloud in v]
+    if "laser" in sensor:
+        lcfg = laser_config or LaserViewConfig()
+        v, classes = laser_view_clouds(models, seed=np.random.default_rng([seed, 7]), n_views=laser_views, config=lcfg)
+        views += v
+        if laser_cut_views:
+            cut_cfg = dataclasses.replace(lcfg, along_sweep=1.0, allow_cut=True)
+            v, _ = laser_view_clouds(models, seed=np.random.default_rng([seed, 8]), n_views=laser_cut_views,
+                                     config=cut_cfg)
+            views += [(lab, f"{vid}_cut", cloud) for lab, vid, cloud in v]
     model_views, _ = models_view_clouds(models, seed=seed, config=POSE_MODEL_KINECT, tied_rests=True)
     return build_database(views, classes, seed=seed, model_views=model_views)
 
@@ -154,6 +182,8 @@ def summarise(records: list[dict], labels: list[str]) -> dict:
     reasons = Counter(r["reason"].split(" 0")[0].split(" 1")[0] for r in records if r["truth_label"] != BG and not r["detected"])
     inner = [r for r in records if r["truth_label"] != BG and not r["touches_border"]]
     nearest_ok = sum(r["nearest_label"] == r["truth_label"] for r in inner)
+    nearest_by_class = {lab: (sum(r["nearest_label"] == lab for r in inner if r["truth_label"] == lab),
+                              sum(r["truth_label"] == lab for r in inner)) for lab in labels}
     obj_dets = sum(t != BG and p != UNK for t, p in zip(truth, pred))
     whole = [(t, p) for r, t, p in zip(records, truth, pred) if t != BG and not r["touches_border"]]
     objects, found = set(), set()  # per object: found when one of its clusters is recognised as its class
@@ -167,6 +197,7 @@ def summarise(records: list[dict], labels: list[str]) -> dict:
     return {"recall_whole": sum(t == p for t, p in whole) / len(whole) if whole else math.nan, "n_whole": len(whole),
             "objects": len(objects), "objects_found": len(found), "fa_by_kind": {k: (fa_kind[k], n_kind[k]) for k in n_kind},
             "object_precision": tp_all / obj_dets if obj_dets else math.nan, "miss_reasons": dict(reasons), "nearest_acc": nearest_ok / len(inner) if inner else math.nan,
+            "nearest_by_class": nearest_by_class,
             "n_inner": len(inner), "precision": tp_all / dets if dets else math.nan, "recall": tp_all / n_obj if n_obj else math.nan,
             "bg_clusters": n_bg, "bg_false_accepts": fa, "bg_fa_rate": fa / n_bg if n_bg else math.nan,
             "n_obj_clusters": n_obj, "n_detections": dets, "per_class": per, "confusion": conf}
@@ -182,6 +213,8 @@ def print_main(s: dict, labels: list[str]) -> None:
           f" = {pct(s['bg_fa_rate'])} %; precision on object clusters only {pct(s['object_precision'])} %")
     print(f"object clusters not touching the scan border: {s['n_inner']}, nearest view of the right class: "
           f"{pct(s['nearest_acc'])} %; missed object clusters by reason: {s['miss_reasons']}")
+    print("nearest view of the right class, per class (uncut clusters): "
+          + ", ".join(f"{lab} {a}/{n}" for lab, (a, n) in s["nearest_by_class"].items()))
     print(f"recall over object clusters not cut by the scan border {pct(s['recall_whole'])} % ({s['n_whole']}); objects "
           f"found in at least one scan {s['objects_found']}/{s['objects']}; background false accepts by kind "
           + ", ".join(f"{k} {a}/{n}" for k, (a, n) in sorted(s["fa_by_kind"].items())))
@@ -208,10 +241,27 @@ def main(argv=None) -> None:
     ap.add_argument("--elevations", default="45,60,75,85", help="database survey elevations (deg), comma list")
     ap.add_argument("--n-views", type=int, default=12, help="database views per class and elevation")
     ap.add_argument("--objects", default="catalogue", choices=("catalogue", "builtin"))
+    ap.add_argument("--db-sensor", default="kinect", choices=("kinect", "laser", "kinect+laser"),
+                    help="recognition views of the database: Kinect-like survey views (default), views rendered by "
+                         "the missions' laser scanner from route-like viewpoints, or both")
+    ap.add_argument("--laser-views", type=int, default=48, help="with --db-sensor *laser: whole views per class")
+    ap.add_argument("--laser-cut-views", type=int, default=0,
+                    help="with --db-sensor *laser: extra views per class that the swath's border may cut")
+    ap.add_argument("--descriptor", default="esf+vfh", choices=("esf", "vfh", "esf+vfh"),
+                    help="descriptor of the main tables and headlines (default esf+vfh, the pipeline's)")
+    ap.add_argument("--rejection", default=None, choices=("global", "per_class"),
+                    help="override the settings' rejection mode (PipelineConfig default global)")
+    ap.add_argument("--reject-margin", type=float, default=None,
+                    help="override the setting's reject_margin (PipelineConfig default 6)")
     ap.add_argument("--sweep", default="noise,density,occlusion,combo",
                     help="comma list of: noise, density, occlusion, combo, margin ('' = none)")
     ap.add_argument("--config", default="catalogue", choices=tuple(CONFIGS),
                     help="pipeline setting of the tables and sweeps (the others' headlines are printed too)")
+    ap.add_argument("--compare", default="all",
+                    help="comma list of the other settings whose headlines are printed on the same missions "
+                         "('all', default; '' = none)")
+    ap.add_argument("--records", default=None, metavar="FILE.jsonl",
+                    help="write every scored cluster of the main setting (one JSON object per line)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     if args.objects == "builtin":
@@ -224,24 +274,46 @@ def main(argv=None) -> None:
     if args.quick:
         args.elevations, args.n_views = "75", 8
     elevations = tuple(float(e) for e in args.elevations.split(","))
-    db = build_db(models, args.seed, elevations, args.n_views)
-    print(f"database: {len(labels)} classes x {args.n_views} views x elevations {elevations} deg, built in {time.perf_counter() - t0:.0f} s; missions: "
-          + " / ".join(",".join(g) for g in subsets(labels)))
+    db = build_db(models, args.seed, elevations, args.n_views, sensor=args.db_sensor, laser_views=args.laser_views,
+                  laser_cut_views=args.laser_cut_views)
+    laser_text = (f" + laser {args.laser_views} whole + {args.laser_cut_views} cut views per class"
+                  if "laser" in args.db_sensor else "")
+    kinect_text = (f"{args.n_views} Kinect views x elevations {elevations} deg" if "kinect" in args.db_sensor
+                   else "no Kinect views")
+    print(f"database ({args.db_sensor}): {len(labels)} classes x {kinect_text}{laser_text} = {db.n_views} views, "
+          f"built in {time.perf_counter() - t0:.0f} s; missions: " + " / ".join(",".join(g) for g in subsets(labels)))
     base = ScannerConfig()
-    kw = CONFIGS[args.config]
+    kw = dict(CONFIGS[args.config])
+    override = {k: v for k, v in (("reject_margin", args.reject_margin), ("rejection", args.rejection)) if v is not None}
+    kw.update(override)
+    if override:
+        print(f"overrides (all settings): {override}")
     t1 = time.perf_counter()
     main_ms: list = []
-    records, missions = run_case(db, models, seed=args.seed, scanner=base, scan_ms=main_ms, **kw)
+    records, missions = run_case(db, models, seed=args.seed, scanner=base, scan_ms=main_ms,
+                                 descriptor=args.descriptor, **kw)
     s = summarise(records, labels)
     n_scans = sum(len(m.scans) for m in missions)
     print(f"default scanner ({base.n_lines} x {base.points_per_line}, noise {base.noise_floor_m * 1e3:.1f} mm + "
-          f"{base.noise_range2_per_m * 1e3:.1f} mm/m^2 r^2), esf+vfh chi2, pipeline setting {args.config!r}: "
+          f"{base.noise_range2_per_m * 1e3:.1f} mm/m^2 r^2), {args.descriptor} chi2, pipeline setting {args.config!r}: "
           f"{n_scans} scans in {time.perf_counter() - t1:.0f} s")
+    compare = set(CONFIGS) if args.compare == "all" else {c for c in args.compare.split(",") if c}
+    unknown = compare - set(CONFIGS)
+    if unknown:
+        ap.error(f"--compare: unknown setting(s) {sorted(unknown)}; choose from {sorted(CONFIGS)}")
+    if args.records:
+        import json
+
+        with open(args.records, "w") as fh:
+            for r in records:
+                fh.write(json.dumps({k: v for k, v in r.items() if isinstance(v, (str, int, float, bool, type(None)))})
+                         + "\n")
     for name, other in CONFIGS.items():  # headline of the other settings, same missions
-        if name != args.config:
+        if name != args.config and name in compare:
             other_ms: list = []
+            other = {**other, **override}
             o = summarise(run_case(db, models, seed=args.seed, scanner=base, missions=missions, scan_ms=other_ms,
-                                   **other)[0], labels)
+                                   descriptor=args.descriptor, **other)[0], labels)
             print(f"setting {name!r}: precision {pct(o['precision'])} %  recall {pct(o['recall'])} % "
                   f"(not cut by the border {pct(o['recall_whole'])} %; objects {o['objects_found']}/{o['objects']})  "
                   f"background false accepts {o['bg_false_accepts']}/{o['bg_clusters']} = {pct(o['bg_fa_rate'])} %; "
@@ -269,14 +341,14 @@ def main(argv=None) -> None:
                         print(f"| {d} | {c} | failed: {exc} | | |")
                         continue
                 print(f"| {d} | {c} | {pct(r['precision'])} | {pct(r['recall'])} | {pct(r['bg_fa_rate'])} |", flush=True)
-        r = summarise(run_case(db, models, seed=args.seed, scanner=base, missions=missions, rejection="per_class",
-                               **kw)[0], labels)
+        r = summarise(run_case(db, models, seed=args.seed, scanner=base, missions=missions,
+                               **{**kw, "rejection": "per_class"})[0], labels)
         print(f"| esf+vfh | chi2, per-class rejection | {pct(r['precision'])} | {pct(r['recall'])} | {pct(r['bg_fa_rate'])} |")
     if "margin" in sweeps:  # a tighter rejection threshold, and counting only detections with a reliable pose
         print("\n| reject_margin | detections counted | precision % | recall % | background FA % |\n|---|---|---|---|---|")
         for margin in (6.0, 4.0, 3.0):
-            recs = records if margin == 6.0 else run_case(db, models, seed=args.seed, scanner=base, missions=missions,
-                                                         reject_margin=margin, **kw)[0]
+            recs = records if margin == kw.get("reject_margin", 6.0) else run_case(
+                db, models, seed=args.seed, scanner=base, missions=missions, **{**kw, "reject_margin": margin})[0]
             rel = [dict(r, detected=bool(r["detected"] and r.get("reliable"))) for r in recs]
             rel = [r if r["detected"] else dict(r, label=UNK) for r in rel]
             for name, rr in (("all", summarise(recs, labels)), ("reliable pose only", summarise(rel, labels))):

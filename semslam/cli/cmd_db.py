@@ -8,6 +8,9 @@
   of the sides) that pose estimation fuses instead of the recognition views.
 * ``semslam db build --models MODELS_DIR --out DB.npz``: your CAD models (STL, OBJ, PLY and a
   ``models.toml``, see :mod:`semslam.simulation.cad_models`) seen by the same camera, with the same options.
+* ``--sensor laser`` (or ``kinect+laser``) with ``--builtin``/``--models``: the recognition views are rendered by
+  the missions' laser scanner from route-like viewpoints instead of (or as well as) the Kinect-like camera
+  (:mod:`semslam.simulation.laser_views`); the pose-model views stay Kinect views.
 * ``semslam db info DB.npz``: classes, views per class, symmetry, size, descriptor settings, file version.
 """
 
@@ -60,6 +63,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                             "the papers used 45)")
     build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
                        help="camera distance of the --builtin/--models views, metres (default 1.5; the papers ~0.7)")
+    build.add_argument("--sensor", default="kinect", choices=("kinect", "laser", "kinect+laser"),
+                       help="with --builtin/--models: the recognition views' sensor: the Kinect-like camera (default), "
+                            "the missions' laser scanner from route-like viewpoints (--n-views headings, "
+                            "semslam.simulation.laser_views), or both; the pose-model views stay Kinect views")
     build.add_argument("--model-views", type=int, default=8, metavar="N",
                        help="pose-model views per object with --builtin/--models (default 8; 0: pose uses the recognition views)")
     build.add_argument("--model-elevation", type=float, default=60.0, metavar="DEG",
@@ -116,7 +123,13 @@ def run_build(args: argparse.Namespace) -> int:
         kwargs["mapper"] = partial(_dask_mapper, jobs=check_jobs(args.jobs), scheduler=args.scheduler)
     if (args.builtin or args.models is not None) and (args.fuse or args.up is not None):
         raise InputError("--fuse and --up are for a VIEWS_DIR of recorded views, not --builtin or --models.")
-    if args.builtin:
+    if args.sensor != "kinect" and not (args.builtin or args.models is not None):
+        raise InputError(f"--sensor {args.sensor} renders views of --builtin or --models objects; a VIEWS_DIR holds "
+                         "recorded views. Drop --sensor or use --builtin/--models.")
+    if (args.builtin or args.models is not None) and args.sensor != "kinect":
+        db, warned = _build_with_laser(args, kwargs)
+        source = "builtin" if args.builtin else str(args.models)
+    elif args.builtin:
         import math
 
         from ..simulation.config import KinectConfig
@@ -152,6 +165,7 @@ def run_build(args: argparse.Namespace) -> int:
     payload = {"path": str(path), "source": source, "seconds": round(time.perf_counter() - t0, 3), **db.summary()}
     if args.models is not None:
         payload["warnings"] = warned
+    payload["sensor"] = args.sensor
     emit(args, payload, lambda: f"wrote {path}: {db.n_views} views of {len(db.classes)} classes "
                                 f"({', '.join(db.classes)}) in {payload['seconds']:.1f} s")
     return 0
@@ -164,11 +178,47 @@ def _dask_mapper(fn, items, progress, *, jobs: int, scheduler: str | None):
     return map_tasks(fn, items, jobs=jobs, scheduler=scheduler, progress=progress, desc="descriptors")
 
 
+def _build_with_laser(args: argparse.Namespace, kwargs: dict):
+    """``--sensor laser|kinect+laser`` with ``--builtin``/``--models``: the database and the models' warnings."""
+    import math
+
+    from ..errors import InputError
+    from ..recognition import build_database
+    from ..simulation.cad_models import models_view_clouds, read_models
+    from ..simulation.config import KinectConfig
+    from ..simulation.laser_views import laser_view_clouds
+
+    if args.model_views < 0:
+        raise InputError(f"The '--model-views' option must be >= 0. Got {args.model_views} instead.")
+    if args.builtin:
+        from ..simulation.objects import builtin_objects
+
+        models, warned = builtin_objects(), []
+    else:
+        models, warned = _with_warnings(read_models, args.models)
+
+    def kinect_views(config: KinectConfig, n: int, tied: bool):  # as the Kinect-only paths render them
+        if args.builtin:
+            from ..simulation.kinect import builtin_view_clouds
+
+            return builtin_view_clouds(seed=args.seed, n_views=n, config=config)[0]
+        return models_view_clouds(models, seed=args.seed, n_views=n, config=config, progress=args.progress,
+                                  tied_rests=tied)[0]
+
+    views, classes = laser_view_clouds(models, seed=args.seed, n_views=args.n_views, progress=args.progress)
+    if args.sensor == "kinect+laser":
+        kinect = KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance)
+        views = kinect_views(kinect, args.n_views, False) + views
+    model_views = None
+    if args.model_views:
+        model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
+        model_views = kinect_views(model_kinect, args.model_views, True)
+    return build_database(views, classes, model_views=model_views, **kwargs), warned
+
+
 def _build_from_models(args: argparse.Namespace, kwargs: dict):
     """``--models``: the database and the models' warnings (each also printed as one stderr line)."""
     import math
-    import sys
-    import warnings
 
     from ..errors import InputError
     from ..simulation.cad_models import build_models_database
@@ -178,10 +228,19 @@ def _build_from_models(args: argparse.Namespace, kwargs: dict):
         raise InputError(f"The '--model-views' option must be >= 0. Got {args.model_views} instead.")
     kinect = KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance)
     model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
+    return _with_warnings(build_models_database, args.models, n_views=args.n_views, n_model_views=args.model_views,
+                          kinect=kinect, model_kinect=model_kinect, **kwargs)
+
+
+def _with_warnings(fn, *a, **kw):
+    """``(fn(*a, **kw), [messages])``: the user's models' warnings (``UserWarning``), each also printed as one
+    stderr line; other warnings pass through."""
+    import sys
+    import warnings
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        db = build_models_database(args.models, n_views=args.n_views, n_model_views=args.model_views, kinect=kinect,
-                                   model_kinect=model_kinect, **kwargs)
+        out = fn(*a, **kw)
     warned = []
     for w in caught:
         if issubclass(w.category, UserWarning):
@@ -189,7 +248,7 @@ def _build_from_models(args: argparse.Namespace, kwargs: dict):
             print(f"semslam: warning: {w.message}", file=sys.stderr)
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return db, warned
+    return out, warned
 
 
 def format_summary(summary: dict, path: str) -> str:
