@@ -112,6 +112,10 @@ class GatingConfig:
     orientation_innovation: str = "rotvec"
     #: landmarks farther than this from the vehicle are not association candidates (m)
     candidate_radius_m: float = 10.0
+    #: a detection that fails the association gate (``gate_probability``) but passes this much wider one against a
+    #: landmark of its class is dropped, not pooled towards a new landmark: a near miss is that landmark seen under
+    #: a model error (a large heading error, say), not another object. Never narrower than ``gate_probability``
+    creation_gate_probability: float = 0.99999
 
     def __post_init__(self) -> None:
         check_choice("association", self.association, ("nn", "jcbb"), caller="GatingConfig")
@@ -120,6 +124,9 @@ class GatingConfig:
         if not 0.5 < self.gate_probability < 1.0 or not 0.5 < self.sensor_gate_probability < 1.0:
             raise ConfigError("The gate probabilities of GatingConfig must be in (0.5, 1). Got "
                               f"{self.gate_probability!r} and {self.sensor_gate_probability!r} instead.")
+        if not 0.5 < self.creation_gate_probability < 1.0:
+            raise ConfigError(f"The 'creation_gate_probability' field of GatingConfig must be in (0.5, 1). Got "
+                              f"{self.creation_gate_probability!r} instead.")
         if self.sensor_gate_max_rejections < 0:
             raise ConfigError(f"The 'sensor_gate_max_rejections' field of GatingConfig must be >= 0. Got "
                               f"{self.sensor_gate_max_rejections!r} instead.")

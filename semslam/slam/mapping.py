@@ -4,6 +4,9 @@ new landmarks, and surveyed (a-priori) landmarks.
 The papers' cascade: a detection is first tested against the landmarks of its class with the full 6-DoF pose,
 else with the position only; unassociated detections become candidates, and a candidate becomes a landmark
 once ``consensus_min_observations`` of them agree (:class:`~semslam.slam.consensus.ConsensusInitializer`).
+The gates are those of the iterated innovation (:func:`~semslam.slam.association.iterated_innovation`); a detection
+that misses the association gate but passes the much wider creation gate of a landmark of its class is dropped,
+never pooled towards a duplicate of that landmark.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from ..errors import SlamError
 from ..geometry import RigidTransform, rpy_from_rotation
 from ..symmetry import Symmetry
 from . import _ekf_kernels as kern
-from .association import GateThresholds, associate, associate_jcbb, innovation, measurement_from_detection
+from .association import GateThresholds, associate, associate_jcbb, iterated_innovation, measurement_from_detection
 from .config import SlamConfig
 from .consensus import ConsensusInitializer, Observation
 from .ekf import SemanticEkf
@@ -53,6 +56,7 @@ class ObjectMapper:
                                               cfg.initialisation.consensus_min_observations, cfg.initialisation.consensus_max_age_s)
         gate = GateThresholds(cfg.gating.gate_probability)
         self._thr = {d: gate.threshold(d) for d in range(1, 7)}
+        self._thr_create = max(self._thr[3], GateThresholds(cfg.gating.creation_gate_probability).threshold(3))
 
     # ------------------------------------------------------------------ surveyed landmarks
     def add_surveyed(self, stamp_s: float, names, labels, T_world_objects, position_sigma_m: float,
@@ -101,7 +105,8 @@ class ObjectMapper:
             inns = {}
             for a, x in enumerate(M):
                 for b, j in enumerate(L):
-                    inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=cfg.gating.orientation_innovation)
+                    inn = iterated_innovation(ekf, j, x, R_ahrs, att_cov, rows=("position",), keep_within=self._thr,
+                                              orientation_innovation=cfg.gating.orientation_innovation)
                     inns[(a, b)] = inn
                     d2[a, b] = inn.d2_position
             gate = d2 <= self._thr[3]
@@ -117,6 +122,9 @@ class ObjectMapper:
                     if gate[a].any():  # compatible with a landmark taken by another detection: ambiguous, drop
                         self._log(stamp_s=t, kind="landmark", accepted=False, test="none", label=label,
                                   detection=x.index, reason="ambiguous")
+                    elif (d2[a] <= self._thr_create).any():  # a near miss of a landmark: not a new object
+                        self._log(stamp_s=t, kind="landmark", accepted=False, test="none", label=label,
+                                  detection=x.index, reason="near landmark")
                     else:
                         unassociated.append(x)
         for x in unassociated:
@@ -125,7 +133,9 @@ class ObjectMapper:
     def _update_landmark(self, t, x, j, R_ahrs, att_cov, det) -> None:
         ekf = self.ekf
         self._ensure_active(j)
-        inn = innovation(ekf, j, x, R_ahrs, att_cov, orientation_innovation=self.cfg.gating.orientation_innovation)
+        rows = ("position", "pose") if self.test == "pose" else ("position",)
+        inn = iterated_innovation(ekf, j, x, R_ahrs, att_cov, rows=rows, keep_within=self._thr,
+                                  orientation_innovation=self.cfg.gating.orientation_innovation)
         lm = ekf.landmarks[j]
         common = dict(stamp_s=t, kind="landmark", landmark=j, label=x.label, landmark_label=lm.label,
                       detection=x.index, object_name=det.extras.get("object_name", ""))
