@@ -103,6 +103,29 @@ def _class_size_limit_m(rec: Any, label: str) -> float:
     return limit
 
 
+def _detect_verified(rec: Any, scan: Any, seg: Any, raw_idx: np.ndarray, cloud: Any, label: str, view_index: int,
+                     match: Any, stamps: np.ndarray | None, stamp_s: float, scan_id: Any, seed: int, timings: dict,
+                     border: bool, what: str) -> Detection | None:
+    """Pose and verify a hypothesis made of the scan points ``raw_idx`` (a union of parts, a piece found inside a
+    cluster): the detection, or None when the pose fails or verification rejects it (logged with ``what``)."""
+    import logging
+
+    from ..errors import RegistrationError
+
+    cfg = rec.config
+    det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
+    try:
+        det = rec._detect(scan, raw_idx, cloud, label, view_index, match, det_stamp, scan_id, seed, timings, border,
+                          seg=seg)
+    except RegistrationError:
+        return None
+    failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
+    if failed:
+        logging.getLogger("semslam.pipeline").debug("%s: %s %s", what, label, failed)
+        return None
+    return det
+
+
 def _verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None) -> str:
     """Why a detection fails hypothesis verification (``PipelineConfig.verify_min_fitness`` /
     ``verify_max_visibility``), or ``""`` when it passes (or verification is off). The visibility cost is tested

@@ -44,13 +44,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._validation import as_float_array, check_choice, check_int, check_positive
-from ..errors import DescriptorError, InputError, RegistrationError
+from ..errors import DescriptorError, InputError
 from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import border_touched, principal_extent
 from ..segmentation.clusters import extract_euclidean_clusters
 from ..segmentation.primitives import Primitive, fit_primitive
-from ._scan_helpers import (ClusterOutcome, _class_size_limit_m, _scan_angular_extent, _valid_points,
-                            _verification_failure)
+from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _detect_verified, _scan_angular_extent, _valid_points
 
 __all__ = ["AttachedConfig", "find_attached", "remove_structure"]
 
@@ -375,15 +374,9 @@ def find_attached(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome],
             continue
         prims, (_, j, piece, cloud, match, label, view_index, border, explained) = found
         raw_idx = _input_indices_of(seg, cloud_idx[piece])
-        det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
-        try:
-            det = rec._detect(scan, raw_idx, cloud, label, view_index, match, det_stamp, scan_id, cseed + 500, timings,
-                              border, seg=seg)
-        except RegistrationError:
-            continue
-        failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
-        if failed:
-            _log.debug("cluster %d: attached %s %s", k, label, failed)
+        det = _detect_verified(rec, scan, seg, raw_idx, cloud, label, view_index, match, stamps, stamp_s, scan_id,
+                               cseed + 500, timings, border, f"cluster {k}: attached")
+        if det is None:
             continue
         det.extras["attached"] = {"cluster": int(k), "piece_points": int(len(piece)),
                                   "piece_centroid_m": [float(v) for v in pts[piece].mean(axis=0)],

@@ -34,10 +34,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._validation import check_int, check_positive
-from ..errors import DescriptorError, InputError, RegistrationError
+from ..errors import DescriptorError, InputError
 from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import principal_extent
-from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _input_indices, _verification_failure
+from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _detect_verified, _input_indices
 
 __all__ = ["PartsConfig", "merge_parts"]
 
@@ -188,15 +188,9 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
         raw = [_input_indices(seg, k) for k in ks]
         raw_idx = np.sort(np.concatenate(raw))
         border = any(outcomes[k].touches_border for k in ks)
-        det_stamp = float(np.median(stamps[raw_idx])) if stamps is not None and len(raw_idx) else stamp_s
-        try:
-            det = rec._detect(scan, raw_idx, cloud, label, view_index, match, det_stamp, scan_id, seed + u, timings,
-                              border, seg=seg)
-        except RegistrationError:
-            continue
-        failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
-        if failed:
-            _log.debug("union %s: %s %s", ks, label, failed)
+        det = _detect_verified(rec, scan, seg, raw_idx, cloud, label, view_index, match, stamps, stamp_s, scan_id,
+                               seed + u, timings, border, f"union {ks}")
+        if det is None:
             continue
         fits = _part_fitness(rec, det, label, view_index, [scan.points_xyz_m[r] for r in raw])
         if min(fits) < min_part:

@@ -24,7 +24,7 @@ import numpy as np
 from ...errors import SlamError
 from .. import _ekf_kernels as kern
 from ...geometry import rotation_from_rpy
-from ..association import ObjectMeasurement, align_rotation, innovation
+from ..association import ObjectMeasurement, _observed_basis, align_rotation, innovation
 
 
 def X(i: int) -> int:
@@ -118,15 +118,6 @@ def _jr_inv(phi: np.ndarray) -> np.ndarray:
         return np.eye(3) + 0.5 * K + K @ K / 12.0
     c = 1.0 / th ** 2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th))
     return np.eye(3) + 0.5 * K + c * (K @ K)
-
-
-def _observed_basis(axes_w: np.ndarray) -> np.ndarray:
-    """World-frame basis of the observed rotation directions (as :func:`innovation` builds it)."""
-    if len(axes_w) == 0:
-        return np.eye(3)
-    if len(axes_w) == 1:
-        return np.linalg.svd(np.eye(3) - np.outer(axes_w[0], axes_w[0]))[0][:, :2]
-    return np.zeros((3, 0))
 
 
 def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarray, which: str, noise_cov: np.ndarray,
