@@ -133,6 +133,20 @@ def test_detect_and_slam_commands_reproduce_the_demo(quick_run, tmp_path, capsys
     assert a["ate_rmse_m"] == b["ate_rmse_m"] and a["smoother"] == b["smoother"]
 
 
+def test_detect_up_from_attitude_runs_and_is_recorded(quick_run, tmp_path, capsys):
+    """`semslam detect --up-from-attitude`: every scan gets its own up from the AHRS; the demo's database records no
+    class up, so the detections are the demo's exactly, and the option is recorded with the run."""
+    from semslam.cli.main import main
+
+    out, _ = quick_run
+    dets = tmp_path / "dets.jsonl"
+    assert main(["detect", str(out / "mission"), "--db", str(out / "db.npz"), "--seed", "3", "--out", str(dets),
+                 "--config", str(out / "config.json"), "--up-from-attitude", "--json"]) == 0
+    capsys.readouterr()
+    assert dets.read_text() == (out / "detections.jsonl").read_text()
+    assert json.loads((tmp_path / "dets.jsonl.config.json").read_text())["up_from_attitude"] is True
+
+
 def test_report_reads_in_a_minute(quick_run):
     """Issue 18 item 6: the summary (key numbers with goal verdicts) comes first, long tables are collapsed, the raw
     metrics are linked (not dumped), class names are written as people write them. Catches a report that dumps

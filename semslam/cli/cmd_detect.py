@@ -21,6 +21,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     p.add_argument("--vehicle", help="vehicle description (TOML) replacing the dataset's; 'girona500' for the defaults")
     p.add_argument("--seed", type=int, default=0, help="seed of the run (scan k uses seed * 100003 + k; default 0)")
     p.add_argument("--keep-unreliable", action="store_true", help="keep detections whose pose is flagged unreliable")
+    p.add_argument("--up-from-attitude", action="store_true",
+                   help="pose every scan's objects upright about the up direction of the vehicle's attitude at that "
+                        "scan (classes whose database records their up: db build --fuse --up)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -56,10 +59,11 @@ def run(args: argparse.Namespace) -> int:
     recognizer.warm_up()
     progress = not args.no_progress and not getattr(args, "json", False)
     found = detect_mission(dataset, recognizer, seed=args.seed, keep_unreliable=args.keep_unreliable,
-                           progress=progress)
+                           progress=progress, up_from_attitude=args.up_from_attitude)
     write_detections_jsonl(out, found.detections_by_scan)
     resolved = {"pipeline": config.to_dict(), "seed": args.seed, "db": str(args.db),
-                "keep_unreliable": bool(args.keep_unreliable), "mission": str(args.mission)}
+                "keep_unreliable": bool(args.keep_unreliable), "up_from_attitude": bool(args.up_from_attitude),
+                "mission": str(args.mission)}
     atomic_write_text(out.with_name(out.name + ".config.json"), json.dumps(to_jsonable(resolved), indent=2) + "\n")
     summary = found.summary()
     payload = {"out": str(out), "summary": summary, "scans": found.scans}

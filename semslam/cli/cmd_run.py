@@ -24,6 +24,9 @@ def register(subparsers, common) -> None:
     p.add_argument("--backend", choices=("ekf", "isam2", "batch"), default="ekf",
                    help="SLAM estimator: the EKF (default), or a GTSAM factor graph: isam2 (online) or batch")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
+    p.add_argument("--up-from-attitude", action="store_true",
+                   help="pose every scan's objects upright about the up direction of the vehicle's attitude at that "
+                        "scan (classes whose database records their up: db build --fuse --up)")
     p.set_defaults(func=run)
 
 
@@ -81,7 +84,8 @@ def _run(args: argparse.Namespace, out, modes):
         db = load_database(args.db)
     recognizer = ScanRecognizer(db, seed=args.seed)
     recognizer.warm_up()
-    found = detect_mission(dataset, recognizer, seed=args.seed, progress=progress)
+    found = detect_mission(dataset, recognizer, seed=args.seed, progress=progress,
+                           up_from_attitude=args.up_from_attitude)
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     metrics = {}
     for mode in modes:

@@ -50,8 +50,29 @@ class MissionDetections:
         }
 
 
+#: an attitude sample farther than this from a scan's middle does not give that scan an up direction
+MAX_ATTITUDE_GAP_S = 1.0
+
+
+def up_in_scanner(dataset: Dataset, stamp_s: float) -> np.ndarray | None:
+    """The world's up (NED: ``(0, 0, -1)``) in the scanner frame at ``stamp_s``, from the attitude log (roll and pitch
+    interpolated; yaw does not move up) and the scanner's mounting: ``(R_world_vehicle R_vehicle_scanner)^T
+    (0, 0, -1)``. None when no attitude sample lies within :data:`MAX_ATTITUDE_GAP_S` of ``stamp_s``."""
+    from ..geometry import rotation_from_rpy
+
+    log = dataset.attitude
+    t = log.stamp_s
+    if not len(t) or np.min(np.abs(t - stamp_s)) > MAX_ATTITUDE_GAP_S:
+        return None
+    roll = np.interp(stamp_s, t, np.unwrap(log.rpy_rad[:, 0]))
+    pitch = np.interp(stamp_s, t, np.unwrap(log.rpy_rad[:, 1]))
+    R_wv = rotation_from_rpy(float(roll), float(pitch), 0.0)
+    R_vs = np.asarray(dataset.T_vehicle_scanner.matrix, dtype=float)[:3, :3]
+    return (R_wv @ R_vs).T @ np.array([0.0, 0.0, -1.0])
+
+
 def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
-                   progress: Progress = False,
+                   progress: Progress = False, up_from_attitude: bool = False,
                    on_scan: Callable[[ScanRecord, object, RecognitionResult], None] | None = None) -> MissionDetections:
     """Recognise the objects of every scan of ``dataset``.
 
@@ -66,6 +87,11 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         Keep detections whose pose is flagged unreliable (default: only reliable ones go to SLAM).
     progress : bool or callable
         A bar, or ``progress(done, total)`` after every scan (:mod:`semslam._progress`).
+    up_from_attitude : bool
+        Give every scan its own up direction from the vehicle's attitude at the scan's middle
+        (:func:`up_in_scanner`), so classes whose database records their up (``db build --fuse --up``) are posed
+        upright however the vehicle rolls and pitches (``PipelineConfig.up_scanner`` is fixed). A scan without an
+        attitude sample within :data:`MAX_ATTITUDE_GAP_S` uses the configuration's.
     on_scan : callable, optional
         ``on_scan(record, cloud, result)`` after each scan (e.g. scoring against ground truth, figures).
     """
@@ -80,8 +106,9 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         for rec in scans:
             cloud = dataset.load_scan(rec.scan_id)
             stamps = dataset.point_stamps_s(rec, cloud)
+            up = up_in_scanner(dataset, 0.5 * (rec.start_stamp_s + rec.end_stamp_s)) if up_from_attitude else None
             result = recognizer.recognize(cloud, seed=scan_seed(seed, rec.scan_id), stamp_s=rec.end_stamp_s,
-                                          scan_id=rec.scan_id, point_stamps_s=stamps)
+                                          scan_id=rec.scan_id, point_stamps_s=stamps, up_scanner=up)
             kept = [d for d in result.detections if d.reliable or keep_unreliable]
             if kept:
                 out.detections_by_scan[rec.scan_id] = kept

@@ -99,6 +99,7 @@ class ScanRecognizer:
             raise InputError(f"The 'config' argument of ScanRecognizer must be a PipelineConfig. "
                              f"Got {type(config).__name__} instead.")
         cfg = self.config
+        self._up_scanner = cfg.up_scanner  # the up of the scan being recognised (recognize's up_scanner)
         self.recognizer = Recognizer(db, descriptor=cfg.descriptor, rejection=cfg.rejection,
                                      reject_quantile=cfg.reject_quantile, reject_margin=cfg.reject_margin)
         self.svm: SvmClassifier | None = None
@@ -160,7 +161,7 @@ class ScanRecognizer:
 
     # -- one scan ---------------------------------------------------------------------------------
     def recognize(self, scan: PointCloud, *, seed: int | np.random.Generator = 0, stamp_s: float = float("nan"),
-                  scan_id: int = -1, point_stamps_s: Any = None) -> RecognitionResult:
+                  scan_id: int = -1, point_stamps_s: Any = None, up_scanner: Any = None) -> RecognitionResult:
         """Segment ``scan``, recognise each cluster and estimate the pose of the recognised ones.
 
         Parameters
@@ -176,10 +177,20 @@ class ScanRecognizer:
         point_stamps_s : array of shape (N,), optional
             Acquisition time of every scan point (a line scanner takes each line at its own time); a
             detection is then stamped with the median time of its cluster's points.
+        up_scanner : (3,), optional
+            The up direction in this scan's frame (a vehicle's attitude at the scan:
+            :func:`semslam.pipeline.mission.up_in_scanner`), instead of ``PipelineConfig.up_scanner``.
         """
         if not isinstance(scan, PointCloud):
             raise InputError(f"The 'scan' argument of ScanRecognizer.recognize must be a PointCloud. "
                              f"Got {type(scan).__name__} instead.")
+        self._up_scanner = self.config.up_scanner
+        if up_scanner is not None:
+            up = as_float_array("up_scanner", up_scanner, (3,), caller="ScanRecognizer.recognize")
+            if not np.abs(up).max() > 0:
+                raise InputError(f"The 'up_scanner' argument of ScanRecognizer.recognize must be a non-zero 3-vector. "
+                                 f"Got {up.tolist()} instead.")
+            self._up_scanner = tuple(float(v) for v in up / np.abs(up).max())
         stamps = None
         if point_stamps_s is not None:
             stamps = as_float_array("point_stamps_s", point_stamps_s, (scan.n_points,), caller="ScanRecognizer.recognize")
