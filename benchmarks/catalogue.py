@@ -54,7 +54,7 @@ from semslam.pipeline import PipelineConfig, ScanRecognizer, detect_mission
 from semslam.pipeline.parts import PartsConfig
 from semslam.recognition import build_database
 from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
-from semslam.simulation.cad_models import models_view_clouds
+from semslam.simulation.cad_models import models_view_clouds, with_resting_up
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 from semslam.simulation.laser_views import LaserViewConfig, laser_view_clouds
@@ -114,7 +114,7 @@ def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, 
                                      config=cut_cfg)
             views += [(lab, f"{vid}_cut", cloud) for lab, vid, cloud in v]
     model_views, _ = models_view_clouds(models, seed=seed, config=POSE_MODEL_KINECT, tied_rests=True)
-    return build_database(views, classes, seed=seed, model_views=model_views)
+    return with_resting_up(build_database(views, classes, seed=seed, model_views=model_views), models)
 
 
 def occluded(mission, fraction: float, seed: int):
@@ -135,7 +135,7 @@ def background_kind(mission, object_index: int) -> str:
 
 def run_case(db, models: dict, *, seed: int, scanner: ScannerConfig, descriptor: str = "esf+vfh",
              classifier: str = "chi2", loops: int = 1, missions: list | None = None, occlusion: float = 0.0,
-             scan_ms: list | None = None, **pipeline) -> tuple[list[dict], list]:
+             scan_ms: list | None = None, upright: bool = False, **pipeline) -> tuple[list[dict], list]:
     """Simulate (or reuse) one cluttered mission per subset and score every cluster of every scan (``scan_ms``:
     appended the recognition time of every scan, ``RecognitionResult.timings_ms["total"]``)."""
     records, sims = [], []
@@ -159,7 +159,8 @@ def run_case(db, models: dict, *, seed: int, scanner: ScannerConfig, descriptor:
                     row["background_kind"] = background_kind(m, row["truth_object"])
                 records.append(row)
 
-        detect_mission(occluded(mission, occlusion, seed), recognizer, seed=seed, on_scan=score)
+        detect_mission(occluded(mission, occlusion, seed), recognizer, seed=seed, on_scan=score,
+                       up_from_attitude=upright)
     return records, sims
 
 
@@ -260,6 +261,9 @@ def main(argv=None) -> None:
     ap.add_argument("--compare", default="all",
                     help="comma list of the other settings whose headlines are printed on the same missions "
                          "('all', default; '' = none)")
+    ap.add_argument("--upright", action="store_true",
+                    help="pose the classes upright about each scan's up from the vehicle's attitude (the database "
+                         "records each class's up from its resting pose; detect_mission(up_from_attitude=True))")
     ap.add_argument("--records", default=None, metavar="FILE.jsonl",
                     help="write every scored cluster of the main setting (one JSON object per line)")
     args = ap.parse_args(argv)
@@ -284,7 +288,8 @@ def main(argv=None) -> None:
           f"built in {time.perf_counter() - t0:.0f} s; missions: " + " / ".join(",".join(g) for g in subsets(labels)))
     base = ScannerConfig()
     kw = dict(CONFIGS[args.config])
-    override = {k: v for k, v in (("reject_margin", args.reject_margin), ("rejection", args.rejection)) if v is not None}
+    override = {k: v for k, v in (("reject_margin", args.reject_margin), ("rejection", args.rejection),
+                                  ("upright", args.upright or None)) if v is not None}
     kw.update(override)
     if override:
         print(f"overrides (all settings): {override}")

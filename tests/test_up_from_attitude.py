@@ -118,3 +118,30 @@ def test_recognize_uses_the_scans_own_up(fused_db, monkeypatch):
     for bad in ((0.0, 0.0, 0.0), (1.0, np.nan, 0.0), (1.0, 2.0)):
         with pytest.raises(InputError, match="up_scanner"):
             rec.recognize(scan, up_scanner=bad)
+
+
+def test_model_databases_record_the_resting_up_of_untied_classes(tmp_path):
+    """A database built from models records each class's up in its object frame from its most probable resting pose
+    (``R_rest_object^T (0, 0, 1)``), except classes that rest on either of two faces; the pipeline then poses them
+    upright when the scan's up is given."""
+    from semslam.simulation.cad_models import _tied_rests, resting_up_objects, with_resting_up
+    from semslam.simulation.catalogue import catalogue_objects
+
+    models = catalogue_objects()
+    ups = resting_up_objects(models)
+    assert set(ups) == {k for k, m in models.items() if _tied_rests(m) == [0]} and "flange" in ups
+    for label, up in ups.items():
+        R = np.asarray(models[label].resting_poses[0])[:3, :3]
+        np.testing.assert_allclose(R @ up, [0.0, 0.0, 1.0], atol=1e-12)  # up, seen in the rest frame (z up)
+    out = tmp_path / "db.npz"
+    assert main(["db", "build", "--builtin", "--n-views", "2", "--model-views", "2", "--esf-samples", "2000",
+                 "--out", str(out)]) == 0
+    db = load_database(out)
+    from semslam.simulation.objects import builtin_objects
+
+    expected = resting_up_objects(builtin_objects())
+    assert db.params["up_object"] == expected and expected  # saved and read back
+    for label in db.classes:
+        assert db.up_object(label) == expected.get(label)
+    empty = with_resting_up(db, {})
+    assert empty.params["up_object"] == expected  # nothing to add: unchanged

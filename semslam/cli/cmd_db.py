@@ -144,7 +144,10 @@ def run_build(args: argparse.Namespace) -> int:
         if args.model_views:
             model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
             kwargs["model_views"], _ = builtin_view_clouds(seed=args.seed, n_views=args.model_views, config=model_kinect)
-        db = build_database(views, classes, **kwargs)
+        from ..simulation.cad_models import with_resting_up
+        from ..simulation.objects import builtin_objects
+
+        db = with_resting_up(build_database(views, classes, **kwargs), builtin_objects())
         source = "builtin"
     elif args.models is not None:
         db, warned = _build_from_models(args, kwargs)
@@ -213,7 +216,9 @@ def _build_with_laser(args: argparse.Namespace, kwargs: dict):
     if args.model_views:
         model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
         model_views = kinect_views(model_kinect, args.model_views, True)
-    return build_database(views, classes, model_views=model_views, **kwargs), warned
+    from ..simulation.cad_models import with_resting_up
+
+    return with_resting_up(build_database(views, classes, model_views=model_views, **kwargs), models), warned
 
 
 def _build_from_models(args: argparse.Namespace, kwargs: dict):

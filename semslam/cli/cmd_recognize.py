@@ -186,11 +186,11 @@ def run(args: argparse.Namespace) -> int:
     t_db = (time.perf_counter() - t0) * 1e3
     notes = []
     if config.up_scanner is not None:
-        fusion = db.params.get("fusion") or {}
-        no_up = [c for c in db.classes if not (fusion.get(c) or {}).get("up_object")]
+        no_up = [c for c in db.classes if db.up_object(c) is None]
         if no_up:
             notes.append(f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
-                         f"{'it' if len(no_up) == 1 else 'them'} (build it with 'semslam db build VIEWS --fuse --up X,Y,Z'); "
+                         f"{'it' if len(no_up) == 1 else 'them'} (a model that rests on either of two faces has none; for your "
+                         "scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
                          "their pose search spans all orientations")
     scan = read_point_cloud(args.scene)
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)

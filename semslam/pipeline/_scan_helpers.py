@@ -181,7 +181,7 @@ def _detect_cluster(rec: Any, scan: PointCloud, raw_idx: np.ndarray, cluster: Po
     model = rec.pose_model(label, view_index)
     points = scan.points_xyz_m[raw_idx] if len(raw_idx) else cluster.points_xyz_m
     up_scanner = rec._up_scanner  # this scan's (ScanRecognizer.recognize)
-    up_object = (rec.db.params.get("fusion") or {}).get(label, {}).get("up_object") if up_scanner is not None else None
+    up_object = rec.db.up_object(label) if up_scanner is not None else None
     extras["pose_upright"] = up_object is not None
     pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=rec.config.pose, seed=seed,
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object

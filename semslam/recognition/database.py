@@ -189,6 +189,15 @@ class ViewDatabase:
         """``{class: Symmetry}``: what SLAM needs to know of each class (:func:`semslam.slam.run_slam`)."""
         return {c: info.symmetry for c, info in self.class_infos.items()}
 
+    def up_object(self, label: str) -> list | None:
+        """The class's up direction in its object frame, when the database records it: from its resting pose for
+        models (``params["up_object"]``, :func:`semslam.simulation.cad_models.resting_up_objects`) or from fusion
+        with an up (``params["fusion"][label]["up_object"]``); else None."""
+        up = (self.params.get("up_object") or {}).get(label)
+        if up is None:
+            up = ((self.params.get("fusion") or {}).get(label) or {}).get("up_object")
+        return None if up is None else [float(v) for v in up]
+
     def views_of(self, label: str) -> np.ndarray:
         """Indices of the views of class ``label`` (int array)."""
         self.class_info(label)

@@ -53,7 +53,8 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
               "model_kinect": POSE_MODEL_KINECT.to_dict(), "n_model_views": int(n_model_views),
               "n_views": int(n_views), "seed": int(seed), "normal_radius_m": DEFAULT_NORMAL_RADIUS_M,
               "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None,
-              "vfh_arithmetic": "float32 as PCL 1.13", **kwargs}  # a change of the descriptors renews the cache
+              "vfh_arithmetic": "float32 as PCL 1.13", "resting_up": 1,
+              **kwargs}  # a change of the descriptors (or of what the database records) renews the cache
     key = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
     path = cache_dir() / f"builtin_db_{key}.npz"
     if cache and path.is_file():
@@ -65,7 +66,10 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
     model_views = None
     if n_model_views:
         model_views, _ = builtin_view_clouds(seed=seed, n_views=n_model_views, config=POSE_MODEL_KINECT)
-    db = build_database(views, classes, seed=seed, model_views=model_views, **kwargs)
+    from .cad_models import with_resting_up
+    from .objects import builtin_objects
+
+    db = with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, **kwargs), builtin_objects())
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -282,6 +282,29 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
     return views, classes
 
 
+def resting_up_objects(models: dict) -> dict[str, list]:
+    """``{label: up}``: each class's up direction in its object frame when it rests on a level floor in its most
+    probable resting pose, ``R_rest_object^T (0, 0, 1)``. Classes whose most probable rest is tied with another
+    (a part that lies on either of two faces) are left out: their up is not one direction. Recorded in a
+    database as ``params["up_object"]`` (:meth:`~semslam.recognition.ViewDatabase.up_object`), it lets the
+    pipeline pose them upright when the scan's up is known (``recognize --up``, ``run --up-from-attitude``)."""
+    out = {}
+    for label, model in models.items():
+        if not model.resting_poses or _tied_rests(model) != [0]:
+            continue
+        up = np.asarray(model.resting_poses[0], dtype=float)[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        out[label] = [float(v) for v in up / np.linalg.norm(up)]
+    return out
+
+
+def with_resting_up(db: Any, models: dict) -> Any:
+    """``db`` with :func:`resting_up_objects` of ``models`` recorded in its ``params["up_object"]``."""
+    ups = {k: v for k, v in resting_up_objects(models).items() if k in db.classes}
+    if ups:
+        object.__setattr__(db, "params", {**db.params, "up_object": ups})
+    return db
+
+
 def _tied_rests(model: ObjectModel) -> list[int]:
     """Indices of the resting poses of ``model`` within TIE_RATIO of the most probable one (at most 2)."""
     p = np.asarray(model.resting_probabilities, dtype=float)
@@ -322,4 +345,5 @@ def build_models_database(models_dir: str | Path, *, seed: int = 0, n_views: int
     if n_model:
         model_views, _ = models_view_clouds(models, seed=seed, n_views=n_model,
                                             config=model_kinect or POSE_MODEL_KINECT, progress=progress, tied_rests=True)
-    return build_database(views, classes, seed=seed, model_views=model_views, progress=progress, **kwargs)
+    return with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, progress=progress,
+                                          **kwargs), models)
