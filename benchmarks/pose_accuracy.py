@@ -48,7 +48,9 @@ def main() -> None:
     for item in args.set:
         name, _, value = item.partition("=")
         default = getattr(PoseConfig(), name)
-        overrides[name] = type(default)(value) if not isinstance(default, str) else value
+        overrides[name] = (value if isinstance(default, str) else
+                           tuple(float(v) for v in value.split(",") if v) if isinstance(default, tuple) else
+                           type(default)(value))
 
     t0 = time.perf_counter()
     clusters = simulated_clusters(args.seeds, altitudes_m=args.altitudes)
