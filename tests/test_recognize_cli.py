@@ -122,3 +122,27 @@ def test_the_scene_visibility_is_computed_for_the_clusters_its_mode_names(scene,
     assert ("pose_visibility_scene" in det.extras) is expected
     if expected:
         assert 0.0 <= det.extras["pose_visibility_scene"] <= det.extras["pose_visibility"] + 1e-9
+
+
+def test_recognize_pauses_the_garbage_collector_only_while_it_runs(monkeypatch, tmp_path, capsys):
+    """`recognize` runs with the cyclic collector paused (its start-up is ~10^5 long-lived objects) and gives it back
+    as it was, after success and after an error; other commands leave it alone."""
+    import gc
+
+    import semslam.cli.cmd_recognize as cmd
+
+    seen = []
+    monkeypatch.setattr(cmd, "run", lambda args: seen.append(gc.isenabled()) or 0)
+    assert gc.isenabled()
+    assert main(["recognize", "x.pcd", "--db", "builtin"]) == 0
+    assert seen == [False] and gc.isenabled()
+    monkeypatch.undo()
+    assert main(["recognize", str(tmp_path / "missing.pcd"), "--db", "builtin"]) == 1  # an error on the way out
+    assert "semslam: error" in capsys.readouterr().err and gc.isenabled()
+    gc.disable()
+    try:  # a caller that runs with the collector off keeps it off
+        monkeypatch.setattr(cmd, "run", lambda args: 0)
+        assert main(["recognize", "x.pcd", "--db", "builtin"]) == 0
+        assert not gc.isenabled()
+    finally:
+        gc.enable()
