@@ -99,7 +99,9 @@ class ScanRecognizer:
             raise InputError(f"The 'config' argument of ScanRecognizer must be a PipelineConfig. "
                              f"Got {type(config).__name__} instead.")
         cfg = self.config
-        self._up_scanner = cfg.up_scanner  # the up of the scan being recognised (recognize's up_scanner)
+        # the up of the scan being recognised (recognize's up_scanner): per call, so one recognizer must not
+        # recognise two scans at once in threads (processes, as the batch engine uses, are fine)
+        self._up_scanner = cfg.up_scanner
         self.recognizer = Recognizer(db, descriptor=cfg.descriptor, rejection=cfg.rejection,
                                      reject_quantile=cfg.reject_quantile, reject_margin=cfg.reject_margin)
         self.svm: SvmClassifier | None = None
