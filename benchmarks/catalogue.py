@@ -20,7 +20,9 @@ noise and at low density, but at 5 mm noise the floor's remains join the objects
 part-based hypotheses (``PipelineConfig(parts=PartsConfig())``, :mod:`semslam.pipeline.parts`: unknown clusters
 near each other tried as one object, e.g. a gate valve's body and handwheel); ``catalogue_scene`` also checks
 the visibility cost against the whole scan about the cluster (``verify_visibility_image="scene"``: a model point
-behind another object is hidden, one outside the scan's footprint unknown).
+behind another object is hidden, one outside the scan's footprint unknown); ``catalogue_border`` does so only
+for the clusters cut by the scan border, and ``catalogue_border_unionscene`` also for every part-based union
+(``PartsConfig(scene_visibility=True)``: a union may miss a part of its object that went to another cluster).
 The other settings' headline numbers are printed too, on the same missions.
 
 Database (``--db-sensor``): ``kinect`` (default) = Kinect-like survey views at 1.5 m, 12 azimuths x elevations
@@ -76,6 +78,9 @@ CONFIGS = {
                         "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "scene"},
     "catalogue_border": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                          "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "border"},
+    "catalogue_border_unionscene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
+                                    "size_reference": "principal", "parts": PartsConfig(scene_visibility=True),
+                                    "verify_visibility_image": "border"},
 }
 
 

@@ -105,9 +105,11 @@ def _class_size_limit_m(rec: Any, label: str) -> float:
 
 def _detect_verified(rec: Any, scan: Any, seg: Any, raw_idx: np.ndarray, cloud: Any, label: str, view_index: int,
                      match: Any, stamps: np.ndarray | None, stamp_s: float, scan_id: Any, seed: int, timings: dict,
-                     border: bool, what: str) -> Detection | None:
+                     border: bool, what: str, scene_visibility: bool = False) -> Detection | None:
     """Pose and verify a hypothesis made of the scan points ``raw_idx`` (a union of parts, a piece found inside a
-    cluster): the detection, or None when the pose fails or verification rejects it (logged with ``what``)."""
+    cluster): the detection, or None when the pose fails or verification rejects it (logged with ``what``).
+    ``scene_visibility``: verify the visibility cost against the whole scan (:func:`_scene_visibility`) whatever
+    ``verify_visibility_image`` says (``PartsConfig.scene_visibility``)."""
     import logging
 
     from ..errors import RegistrationError
@@ -119,6 +121,10 @@ def _detect_verified(rec: Any, scan: Any, seg: Any, raw_idx: np.ndarray, cloud: 
                           seg=seg)
     except RegistrationError:
         return None
+    if scene_visibility and cfg.verify_max_visibility is not None and "pose_visibility_scene" not in det.extras:
+        points = scan.points_xyz_m[raw_idx] if len(raw_idx) else cloud.points_xyz_m
+        model = rec.pose_model(label, view_index)
+        det.extras["pose_visibility_scene"] = _scene_visibility(rec, scan, seg, points, model, det.T_sensor_object)
     failed = _verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
     if failed:
         logging.getLogger("semslam.pipeline").debug("%s: %s %s", what, label, failed)

@@ -13,7 +13,8 @@ longer than the longest class of the database allows). A union goes through the 
 and is kept only if, in addition, **every part** is on the class's surface under the union's pose (share of its
 points within ``PoseConfig.icp_max_correspondence_m`` of the model at least ``min_part_fitness``): a rock or a
 pipe offcut beside an object does not fit the object's model, so it cannot ride along on a union whose overall
-fitness the object's own points carry. Unions that pass are kept greedily (most points first, then the better
+fitness the object's own points carry. With ``PartsConfig(scene_visibility=True)`` a union's visibility cost is
+verified against the whole scan, not the union's points. Unions that pass are kept greedily (most points first, then the better
 fitness), each cluster in at most one.
 
 The parts of a kept union get the union's class and its one :class:`~semslam.detection.Detection` (with
@@ -66,6 +67,14 @@ class PartsConfig:
         ``verify_min_fitness``.
     max_unions : int
         Unions evaluated per scan at most (nearest gaps first), a bound on the time. Default 24.
+    scene_visibility : bool
+        Verify a union's visibility cost against the whole scan (the scene image of
+        ``PipelineConfig(verify_visibility_image="scene")``) instead of what ``verify_visibility_image`` says.
+        A union is a partial segmentation by construction: a part of the object may have gone to another
+        cluster (the gate valve's handwheel joined to the floor's leftovers when the valve stands on a flange),
+        and against the union's own points the model's surface there counts as a contradiction, although the
+        scan has points there. Against the scene, only model points in front of what the scanner saw (free
+        space) or behind a plane contradict. Default False.
     """
 
     max_gap_factor: float = 3.5
@@ -73,6 +82,7 @@ class PartsConfig:
     max_parts: int = 3
     min_part_fitness: float | None = 0.8
     max_unions: int = 24
+    scene_visibility: bool = False
 
     def __post_init__(self) -> None:
         c = "PartsConfig"
@@ -80,6 +90,9 @@ class PartsConfig:
         check_int("max_candidates", self.max_candidates, caller=c, minimum=1)
         check_int("max_parts", self.max_parts, caller=c, minimum=2, maximum=4)
         check_int("max_unions", self.max_unions, caller=c, minimum=1)
+        if not isinstance(self.scene_visibility, bool):
+            raise InputError(f"The 'scene_visibility' argument of {c} must be a bool. "
+                             f"Got {self.scene_visibility!r} instead.")
         if self.min_part_fitness is not None:
             check_positive("min_part_fitness", self.min_part_fitness, caller=c, allow_zero=True)
             if self.min_part_fitness > 1:
@@ -189,7 +202,7 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
         raw_idx = np.sort(np.concatenate(raw))
         border = any(outcomes[k].touches_border for k in ks)
         det = _detect_verified(rec, scan, seg, raw_idx, cloud, label, view_index, match, stamps, stamp_s, scan_id,
-                               seed + u, timings, border, f"union {ks}")
+                               seed + u, timings, border, f"union {ks}", scene_visibility=pcfg.scene_visibility)
         if det is None:
             continue
         fits = _part_fitness(rec, det, label, view_index, [scan.points_xyz_m[r] for r in raw])
