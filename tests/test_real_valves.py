@@ -368,6 +368,8 @@ def test_back_facing_share_tells_front_from_back():
     turned[:3, :3] = _rot_y(180.0)  # about the plate's vertical axis: the cluster still lies on the plate
     shares = back_facing_shares(front, np.zeros(3), model, [T_true, turned @ T_true])
     assert shares[0] < 0.05 and shares[1] > 0.95
+    assert model.visibility_tree is model.visibility_tree  # built once per model, not per pose
+    np.testing.assert_array_equal(back_facing_shares(front, np.zeros(3), model, [turned @ T_true, T_true]), shares[::-1])
 
 
 def test_recognize_up_gives_consistent_poses_on_real_frames(tmp_path):

@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 import small_gicp
-from scipy.spatial import cKDTree
 
 from .._validation import as_float_array
 from ..cloud import PointCloud
@@ -287,7 +286,7 @@ def back_facing_shares(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, Ts
     away from the sensor (0 for a front view, ~1 for the object seen turned around)."""
     if model.visibility_points is None or not len(model.visibility_points) or not Ts:
         return np.zeros(len(Ts))
-    tree = cKDTree(model.visibility_points)
+    tree = model.visibility_tree
     out = np.empty(len(Ts))
     for k, T in enumerate(Ts):
         p = cluster @ T[:3, :3].T + T[:3, 3]

@@ -211,6 +211,11 @@ class PoseModel:
     radius_grid: RadiusGrid | None = field(default=None, repr=False)
     view_centroids: ViewCentroids | None = field(default=None, repr=False)
 
+    @functools.cached_property
+    def visibility_tree(self) -> cKDTree:
+        """KD-tree of ``visibility_points``, built on first use and kept (the back-facing test of every pose)."""
+        return cKDTree(self.visibility_points)
+
 
 
 def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseModel:
