@@ -19,7 +19,7 @@ from semslam.cli.main import main
 from semslam.cloud import PointCloud
 from semslam.errors import DatabaseError, InputError, RegistrationError
 from semslam.io import read_point_cloud, write_point_cloud
-from semslam.pipeline.fuse import build_fused_database, fuse_class_views, read_poses_csv
+from semslam.pipeline.fuse import build_fused_database, read_poses_csv
 from semslam.recognition.database import load_database
 from semslam.recognition.rejection import calibrate_rejection, loo_same_class_distances, same_viewpoint_pairs
 from semslam.registration import align_upright
