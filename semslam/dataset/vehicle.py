@@ -20,10 +20,14 @@ mounting, never from a particular dive. Read from a small human-written TOML fil
     [depth]
     noise_m = 0.02
 
-Every key is optional; an absent one takes the Girona 500-class default of :meth:`VehicleDescription.girona500`
-(the values below, with their sources in :mod:`semslam.simulation.config`). Unknown keys, wrong types, a
-non-rotation extrinsic and out-of-range values raise :class:`~semslam.errors.DatasetError` naming the file
-and the key.
+Every key is optional but the scanner's extrinsic (``scanner.xyz_m`` with ``scanner.rpy_rad``, or
+``scanner.matrix``): a missing one was silently the identity, so a file without it (an empty file included) is
+an error naming the key; write ``xyz_m = [0, 0, 0]`` for a scanner at the vehicle origin, or use the documented
+defaults (:meth:`VehicleDescription.girona500`, ``--vehicle girona500``) instead of a file. An absent key takes
+the Girona 500-class default (the values below, with their sources in :mod:`semslam.simulation.config`).
+Unknown keys, wrong types, a non-rotation extrinsic, ``min_range_m >= max_range_m`` and values outside their
+plausibility range (:data:`semslam.limits.LIMITS`, ``docs/limits.md``: millimetres in a ``_m`` key, degrees in
+a ``_rad`` key, a zero DVL noise) raise :class:`~semslam.errors.DatasetError` naming the file and the key.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from .._atomic import atomic_write_text
 from .._tables import read_table
 from ..errors import DatasetError, SemslamError
 from ..geometry import RigidTransform
+from ..limits import check as check_limit
 
 VEHICLE_FORMAT_VERSION = 1
 
@@ -98,16 +103,8 @@ class DepthSpec:
 
 _SECTIONS = {"scanner": ScannerSpec, "dvl": DvlSpec, "attitude": AttitudeSpec, "depth": DepthSpec}
 _TRANSFORMS = {"scanner": "T_vehicle_scanner", "dvl": "T_vehicle_dvl"}
-#: (lower, upper) of each number, for a clear error on wrong units (degrees in a _rad key, mm in a _m key)
-_RANGES = {
-    "line_count": (0, 1e6), "min_range_m": (0, 1e3), "max_range_m": (1e-3, 1e3), "fov_rad": (1e-3, math.pi),
-    "rate_hz": (1e-3, 1e4), "noise_abs_mps": (0, 1.0), "noise_rel": (0, 0.5), "max_speed_mps": (1e-3, 50),
-    "degraded_noise_factor": (1, 1e3), "scale_factor_sigma": (0, 0.5), "misalignment_sigma_rad": (0, 0.5),
-    "bias_sigma_mps": (0, 1), "bias_tau_s": (1e-3, 1e7), "degraded_bias_sigma_mps": (0, 1),
-    "degraded_bias_tau_s": (1e-3, 1e7), "beam_angle_rad": (0, 1.2), "beam_azimuth_rad": (-2 * math.pi, 2 * math.pi),
-    "flat_bottom_tolerance_m": (1e-4, 10), "noise_rpy_rad": (0, 0.5), "yaw_bias_walk_rad_per_sqrt_s": (0, 0.1),
-    "noise_m": (1e-5, 10), "water_density_kg_m3": (900, 1100), "atmospheric_pressure_pa": (5e4, 2e5),
-}
+#: the numbers' plausibility ranges: semslam.limits.LIMITS["vehicle.<section>.<key>"] (one table for all of semslam)
+_EXTRINSIC_KEYS = ("xyz_m", "rpy_rad", "matrix")
 
 
 @dataclass(frozen=True)
@@ -153,7 +150,8 @@ class VehicleDescription:
 
     @classmethod
     def from_dict(cls, d: Any, *, source: str = "vehicle description") -> "VehicleDescription":
-        """Build from a dict as :meth:`to_dict` gives (every key optional); errors name ``source`` and the key."""
+        """Build from a dict as :meth:`to_dict` gives (every key optional but the scanner extrinsic, see the module
+        docstring); errors name ``source`` and the key."""
         if not isinstance(d, dict):
             raise DatasetError(f"The {source} must be a table of sections. Got {type(d).__name__} instead.")
         known = {"format_version", "name", *_SECTIONS}
@@ -167,6 +165,17 @@ class VehicleDescription:
         kw = {"name": name}
         for sec, spec_cls in _SECTIONS.items():
             kw[sec] = _section(d.get(sec, {}), spec_cls, sec, source)
+        sc = kw["scanner"]
+        if sc.min_range_m >= sc.max_range_m:
+            raise DatasetError(f"The {source} key 'scanner.min_range_m' must be below 'scanner.max_range_m'. Got "
+                               f"{sc.min_range_m!r} >= {sc.max_range_m!r} instead.")
+        scanner = d.get("scanner", {})
+        if not any(k in scanner for k in ("matrix", "xyz_m", "T_vehicle_scanner")):
+            what = "is empty" if not set(d) - {"format_version", "name"} else "has no scanner extrinsic"
+            raise DatasetError(f"The {source} {what}: the key 'scanner.xyz_m' (with 'scanner.rpy_rad') or "
+                               "'scanner.matrix' (T_vehicle_scanner) is required; write xyz_m = [0, 0, 0] for a "
+                               "scanner at the vehicle origin, or use the documented defaults (--vehicle girona500) "
+                               "instead of a file.")
         return cls(**kw)
 
 
@@ -186,7 +195,9 @@ def _section(raw: Any, spec_cls, sec: str, source: str):
     _unknown(raw, known, source, f"{sec}.")
     kw: dict = {}
     if tkey:
-        kw[tkey] = _transform(raw, raw.get(tkey), sec, tkey, source)
+        T = _transform(raw, raw.get(tkey), sec, tkey, source)
+        if T is not None:
+            kw[tkey] = T
     default = spec_cls()
     for key, value in raw.items():
         if key in ("xyz_m", "rpy_rad", "matrix") or key == tkey:
@@ -196,17 +207,11 @@ def _section(raw: Any, spec_cls, sec: str, source: str):
 
 
 def _value(value: Any, default: Any, key: str, source: str):
-    lo, hi = _RANGES.get(key.split(".")[-1], (-math.inf, math.inf))
-    unit = key.rsplit("_", 1)[-1] if "_" in key else ""
+    name = f"vehicle.{key}"
+    where = f"The {source} key {key!r}"
 
     def num(v):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise DatasetError(f"The {source} key {key!r} must be a number. Got {v!r} instead.")
-        v = float(v)
-        if not (math.isfinite(v) and lo <= v <= hi):
-            hint = " (degrees given for radians?)" if unit == "rad" and abs(v) > hi else ""
-            raise DatasetError(f"The {source} key {key!r} must be in [{lo:g}, {hi:g}] {unit}{hint}. Got {v!r} instead.")
-        return v
+        return float(check_limit(name, v, where, error=DatasetError))
 
     if isinstance(default, tuple):
         if not isinstance(value, list) or (len(default) and len(value) != len(default) and "azimuth" not in key):
@@ -215,34 +220,46 @@ def _value(value: Any, default: Any, key: str, source: str):
             raise DatasetError(f"The {source} key {key!r} must not be empty.")
         return tuple(num(v) for v in value)
     if isinstance(default, int) and not isinstance(default, bool):
-        v = num(value)
-        if v != int(v):
-            raise DatasetError(f"The {source} key {key!r} must be a whole number. Got {value!r} instead.")
-        return int(v)
+        return int(check_limit(name, value, where, error=DatasetError))
     return num(value)
 
 
-def _transform(raw: dict, nested: Any, sec: str, tkey: str, source: str) -> RigidTransform:
-    spec = nested if isinstance(nested, dict) else {k: raw[k] for k in ("xyz_m", "rpy_rad", "matrix") if k in raw}
+def _transform(raw: dict, nested: Any, sec: str, tkey: str, source: str) -> RigidTransform | None:
+    """The section's extrinsic, None when the section gives none."""
+    spec = nested if isinstance(nested, dict) else {k: raw[k] for k in _EXTRINSIC_KEYS if k in raw}
     if nested is not None and not isinstance(nested, dict):
         raise DatasetError(f"The {source} key '{sec}.{tkey}' must be a table with 'matrix' or 'xyz_m'/'rpy_rad'. "
                            f"Got {nested!r} instead.")
-    _unknown(spec, {"xyz_m", "rpy_rad", "matrix"}, source, f"{sec}.")
+    _unknown(spec, set(_EXTRINSIC_KEYS), source, f"{sec}.")
+    if not spec:
+        return None
     try:
         if "matrix" in spec:
             if "xyz_m" in spec or "rpy_rad" in spec:
                 raise DatasetError("give either 'matrix' or 'xyz_m'/'rpy_rad', not both")
-            return RigidTransform(np.asarray(spec["matrix"], dtype=float))
-        xyz = spec.get("xyz_m", [0.0, 0.0, 0.0])
-        rpy = spec.get("rpy_rad", [0.0, 0.0, 0.0])
-        for k, v in (("xyz_m", xyz), ("rpy_rad", rpy)):
-            if not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                                 for x in v):
-                raise DatasetError(f"'{sec}.{k}' must be a list of 3 numbers, got {v!r}")
-        if max(abs(float(a)) for a in rpy) > 2 * math.pi:
-            raise DatasetError(f"'{sec}.rpy_rad' must be radians in [-2 pi, 2 pi] (degrees given?), got {rpy!r}")
-        return RigidTransform.from_xyz_rpy(np.asarray(xyz, dtype=float), np.asarray(rpy, dtype=float))
+            T = RigidTransform(np.asarray(spec["matrix"], dtype=float))
+        else:
+            xyz = spec.get("xyz_m", [0.0, 0.0, 0.0])
+            rpy = spec.get("rpy_rad", [0.0, 0.0, 0.0])
+            for k, v in (("xyz_m", xyz), ("rpy_rad", rpy)):
+                if not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) and
+                                                                     not isinstance(x, bool) for x in v):
+                    raise DatasetError(f"'{sec}.{k}' must be a list of 3 numbers, got {v!r}")
+            T = None
     except (SemslamError, TypeError, ValueError) as exc:
+        raise DatasetError(f"The {source} extrinsic {sec}.{tkey} is invalid: {exc}") from None
+    if T is not None:  # the matrix: its translation in range (its rotation was checked by RigidTransform)
+        for i, x in enumerate(T.matrix[:3, 3]):
+            check_limit("vehicle.extrinsic.xyz_m", float(x), f"The {source} key '{sec}.matrix' translation [{i}]",
+                        error=DatasetError)
+        return T
+    for i, x in enumerate(xyz):
+        check_limit("vehicle.extrinsic.xyz_m", x, f"The {source} key '{sec}.xyz_m[{i}]'", error=DatasetError)
+    for i, a in enumerate(rpy):
+        check_limit("vehicle.extrinsic.rpy_rad", a, f"The {source} key '{sec}.rpy_rad[{i}]'", error=DatasetError)
+    try:
+        return RigidTransform.from_xyz_rpy(np.asarray(xyz, dtype=float), np.asarray(rpy, dtype=float))
+    except (SemslamError, TypeError, ValueError) as exc:  # pragma: no cover - finite, in range: always a rotation
         raise DatasetError(f"The {source} extrinsic {sec}.{tkey} is invalid: {exc}") from None
 
 
