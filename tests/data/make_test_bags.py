@@ -8,7 +8,8 @@ readers must merge): a ``sensor_msgs/PointCloud2`` (16 points, intensity, per-po
 ``sensor_msgs/FluidPressure`` and the custom ``semslam_msgs/msg/Dvl`` defined in
 ``bags/msg/semslam_msgs/msg/Dvl.msg``. The ROS 1 bag embeds every definition (as ROS 1 does); the ROS 2
 sqlite3 bag embeds none (as ROS 2 Humble's recorder); the ROS 2 mcap bag embeds all but the Dvl one. So
-reading the ROS 2 bags' ``/dvl/raw`` needs ``msg_dirs=[MSG_DIR]``. Deterministic: seed 14.
+the ROS 2 bags' ``/dvl/raw`` is read with ``msg_dirs=[MSG_DIR]`` or semslam's packaged definition
+(``semslam/io/ros/msg``, the same fields). Deterministic: seed 14.
 """
 
 from __future__ import annotations

@@ -1,5 +1,7 @@
-"""Message definitions for a bag: the definitions the bag embeds, ``.msg`` files given by the user and a
-default typestore (ROS 1 Noetic or ROS 2 Humble), in that order of precedence. rosbags imported lazily."""
+"""Message definitions for a bag: the definitions the bag embeds, ``.msg`` files given by the user, a default
+typestore (ROS 1 Noetic or ROS 2 Humble) and the definitions packaged with semslam (``semslam/io/ros/msg``:
+semslam's own ``semslam_msgs`` and the DVL messages vehicles record, see its SOURCES.md), in that order of
+precedence. rosbags imported lazily."""
 
 from __future__ import annotations
 
@@ -10,9 +12,13 @@ from typing import Any, Iterable, Iterator, Sequence
 
 from ...errors import BagError
 
-__all__ = ["build_typestore", "load_msg_dirs", "missing_types", "normalize_msgtype"]
+__all__ = ["PACKAGED_MSG_DIR", "build_typestore", "load_msg_dirs", "missing_types", "normalize_msgtype",
+           "packaged_types", "semslam_typestore"]
 
 _IDL_SEP = "=" * 80 + "\n"
+#: the ``PKG/msg/NAME.msg`` definitions shipped with semslam (package data)
+PACKAGED_MSG_DIR = Path(__file__).resolve().parent / "msg"
+_PACKAGED: dict[str, Any] | None = None
 
 
 def normalize_msgtype(name: str) -> str:
@@ -58,6 +64,31 @@ def load_msg_dirs(msg_dirs: Iterable[str | os.PathLike]) -> dict[str, Any]:
             except Exception as err:  # rosbags parse errors, UnicodeDecodeError, OSError
                 raise BagError(f"Message definition '{file}' ({name}) cannot be parsed: {_one_line(err)}") from None
     return types
+
+
+def packaged_types() -> dict[str, Any]:
+    """The rosbags definitions of the ``.msg`` files shipped in :data:`PACKAGED_MSG_DIR` (parsed once)."""
+    global _PACKAGED
+    if _PACKAGED is None:
+        _PACKAGED = load_msg_dirs([PACKAGED_MSG_DIR])
+    return dict(_PACKAGED)
+
+
+def _with_packaged(default_fielddefs: dict[str, Any]) -> dict[str, Any]:
+    """The packaged definitions under the default store's: a standard type keeps its distribution's definition."""
+    types = packaged_types()
+    types.update(default_fielddefs)
+    return types
+
+
+def semslam_typestore(ros1: bool = False) -> Any:
+    """The default typestore (ROS 1 Noetic or ROS 2 Humble) plus every packaged definition it lacks: what a
+    writer of semslam's bags (or a test writing a vendor DVL message) registers its messages from."""
+    from ._encode import default_typestore
+
+    store = default_typestore(ros1=ros1)
+    store.register({k: v for k, v in packaged_types().items() if k not in store.fielddefs})
+    return store
 
 
 def _one_line(err: BaseException) -> str:
@@ -111,13 +142,13 @@ def _closure(types: dict[str, Any], roots: Iterable[str]) -> dict[str, Any]:
 
 
 def build_typestore(connections: Sequence[Any], user_types: dict[str, Any], *, ros1: bool) -> Any:
-    """A rosbags typestore with, by precedence, the bag's embedded, the user's and the default types; only
-    the types the connections need are registered (registration generates code: keep it small)."""
+    """A rosbags typestore with, by precedence, the bag's embedded, the user's, the default and the packaged
+    types; only the types the connections need are registered (registration generates code: keep it small)."""
     from rosbags.typesys import Stores, get_typestore
 
     from ._encode import default_typestore
 
-    types = dict(default_typestore(ros1=ros1).fielddefs)
+    types = _with_packaged(default_typestore(ros1=ros1).fielddefs)
     types.update(user_types)
     types.update(embedded_types(connections))
     store = get_typestore(Stores.EMPTY)

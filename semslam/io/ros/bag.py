@@ -132,6 +132,17 @@ class Bag:
     def __repr__(self) -> str:
         return f"Bag('{self.path}', {'ROS 1' if self.is_ros1 else 'ROS 2'}, {len(self._connections)} connections)"
 
+    @property
+    def start_time_ns(self) -> int | None:
+        """The bag's first receive time over all its topics (ns), None for an empty bag: a clock origin that does
+        not depend on which topics a reader maps."""
+        reader = self._open_reader()
+        try:
+            t = int(reader.start_time)
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            return None
+        return t if 0 <= t < 2 ** 63 - 1 else None
+
     def _open_reader(self) -> Any:
         if self._reader is None:
             raise BagError(f"Bag '{self.path}': is closed.")
