@@ -32,11 +32,11 @@ def test_db_build_info_evaluate(views_dir, tmp_path, capsys):
 
     assert main(["db", "info", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "version 2, 12 views" in text and "| box | 4 | (views) | none |" in text
+    assert "version 3, 12 views" in text and "| box | 4 | (views) | none |" in text
     assert main(["--json", "db", "info", str(out)]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["classes"]["cylinder"]["symmetry"]["kind"] == "none"  # no classes.json: symmetry none
-    assert info["classes"]["sphere"]["n_views"] == 4 and info["version"] == 2
+    assert info["classes"]["sphere"]["n_views"] == 4 and info["version"] == 3
     assert info["n_model_views"] == 0 and info["classes"]["sphere"]["n_model_views"] == 0
 
     assert main(["evaluate", str(out), "--descriptor", "esf", "--classifier", "chi2", "--json"]) == 0
@@ -108,6 +108,7 @@ def test_db_build_builtin(tmp_path, capsys):
             half = db.class_info(label).size_xyz_m / 2
             assert np.quantile(np.max(np.abs(m.points_xyz_m) - half, axis=1), 0.99) <= 0.005
     # catches a negative count accepted, or its error spread over several lines / not naming the value
-    assert main(["db", "build", "--builtin", "--n-views", "1", "--model-views", "-1", "--out", str(out)]) == 1
+    assert main(["db", "build", "--builtin", "--n-views", "1", "--model-views", "-1", "--out", str(out),
+                 "--overwrite"]) == 1
     line = _one_line_error(capsys)
     assert "'--model-views' option must be >= 0" in line and "-1" in line

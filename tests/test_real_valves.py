@@ -248,9 +248,11 @@ def test_fuse_without_poses_estimates_the_alignment(tmp_path):
 
 
 def test_fuse_a_class_with_one_view_and_the_cli(tmp_path):
-    _write_views(tmp_path, yaws=(0.0,), poses=None)
-    out = tmp_path / "db.npz"
-    assert main(["db", "build", str(tmp_path), "--fuse", "--up", "0,-1,0", "--out", str(out), "--esf-samples", "2000"]) == 0
+    views = tmp_path / "views"
+    views.mkdir()
+    _write_views(views, yaws=(0.0,), poses=None)
+    out = tmp_path / "db.npz"   # beside the views: an output inside an input is refused
+    assert main(["db", "build", str(views), "--fuse", "--up", "0,-1,0", "--out", str(out), "--esf-samples", "2000"]) == 0
     db = load_database(out)
     assert db.n_views == 1 and db.params["fusion"]["widget"]["doubtful"] == []
     c = db.view_points(0)

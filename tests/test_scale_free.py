@@ -223,7 +223,8 @@ def test_fixed_lengths_keep_the_old_descriptors_and_params(kinect_views):
 
     views, classes = kinect_views
     db = build_database(views[::8], {label: classes[label] for label, _, _ in views[::8]}, esf_n_samples=500)
-    assert set(db.params) == {"vfh_variant", "normal_radius_m", "esf_n_samples", "voxel_leaf_m", "seed"}
+    assert set(db.params) == {"vfh_variant", "normal_radius_m", "esf_n_samples", "voxel_leaf_m", "seed",
+                              "preprocessing"}
     assert db.params["normal_radius_m"] == 0.015 and db.params["voxel_leaf_m"] == 0.005
     c = views[8][2]
     pts = voxel_downsample(c.points_xyz_m, 0.005)

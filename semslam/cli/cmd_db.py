@@ -57,6 +57,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     build.add_argument("--no-clean", dest="clean", action="store_false",
                        help="keep points at the sensor origin and drawn lines in VIEWS_DIR views (default: dropped)")
     build.add_argument("--out", required=True, metavar="DB", help="database file to write (.npz)")
+    build.add_argument("--overwrite", action="store_true", help="replace the --out file if it exists")
     build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin/--models (default 8)")
     build.add_argument("--kinect-elevation", type=float, default=75.0, metavar="DEG",
                        help="camera elevation of the --builtin/--models views, degrees (default 75: the survey geometry; "
@@ -78,9 +79,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                             "(0.9 x the views' measured point spacing); 0 disables (default 0.005, the "
                             "segmentation's grid)")
     build.add_argument("--seed", type=int, default=0, help="seed of the simulated views and of ESF (default 0)")
-    build.add_argument("--normal-radius", type=_length_or_auto, default=0.015, metavar="M|auto",
+    build.add_argument("--normal-radius", type=_length_or_auto, default=None, metavar="M|auto",
                        help="normal-estimation radius for the VFH, metres, or auto (3 voxels of the measured "
-                            "spacing; default 0.015)")
+                            "spacing); default: 3 voxels of --voxel (0.015), auto with --voxel 0 or auto")
     build.add_argument("--vfh-variant", default=None, help="VFH binning variant (default: the descriptors' default)")
     build.add_argument("--esf-samples", type=int, default=20000, help="ESF point-triplet samples (default 20000)")
     build.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -105,12 +106,16 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 def run_build(args: argparse.Namespace) -> int:
     import time
+    from pathlib import Path
 
+    from .._outdir import check_output_file, staged_output_file
     from ..errors import InputError
     from ..recognition import build_database, build_database_from_folder, save_database
     from ._output import emit
 
     t0 = time.perf_counter()
+    inputs = (args.views_dir, args.models)
+    check_output_file(args.out, overwrite=args.overwrite, inputs=inputs)  # before the work (semslam._outdir)
     kwargs = {"vfh_variant": args.vfh_variant, "normal_radius_m": args.normal_radius,
               "esf_n_samples": args.esf_samples,
               "voxel_leaf_m": args.voxel if args.voxel == "auto" or args.voxel > 0 else None,
@@ -164,7 +169,9 @@ def run_build(args: argparse.Namespace) -> int:
             raise InputError("--up is for --fuse (views in their own sensor frames); add --fuse or drop --up.")
         db = build_database_from_folder(args.views_dir, clean=args.clean, **kwargs)
         source = str(args.views_dir)
-    path = save_database(db, args.out)
+    with staged_output_file(args.out, overwrite=args.overwrite, inputs=inputs) as tmp:
+        save_database(db, tmp)
+    path = Path(args.out)
     payload = {"path": str(path), "source": source, "seconds": round(time.perf_counter() - t0, 3), **db.summary()}
     if args.models is not None:
         payload["warnings"] = warned

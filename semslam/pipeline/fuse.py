@@ -302,6 +302,9 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
         fused += [(label, vid, c) for vid, c in out]
         reports[label] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object,
                           "median_rms_m": float(np.nanmedian(list(rep.rms_m.values()))) if rep.rms_m else None}
-    db = build_database(fused, folder_classes(fused, declared, meta_path), seed=seed, progress=progress, **kwargs)
+    from ..recognition.preprocessing import ViewPreprocessing  # the cleaning is recorded, applied to queries
+
+    db = build_database(fused, folder_classes(fused, declared, meta_path), seed=seed, progress=progress,
+                        preprocessing=ViewPreprocessing(clean=bool(clean)), views_preprocessed=True, **kwargs)
     object.__setattr__(db, "params", {**db.params, "fusion": reports})
     return db

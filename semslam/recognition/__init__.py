@@ -14,6 +14,7 @@ from .storage import load_database, save_database
 from .view_descriptors import ViewDescriptors, combine_descriptors, compute_view_descriptors
 from .evaluation import EvaluationResult, confusion_matrix, leave_one_out
 from .matching import Chi2NearestNeighbor, SvmClassifier, chi2_distances
+from .preprocessing import ViewPreprocessing
 from .recognizer import Match, Recognizer
 from .rejection import (
     UNKNOWN_LABEL,
@@ -35,6 +36,7 @@ __all__ = [
     "SvmClassifier",
     "ViewDatabase",
     "ViewDescriptors",
+    "ViewPreprocessing",
     "build_database",
     "build_database_from_folder",
     "calibrate_rejection",

@@ -18,8 +18,10 @@ from ..cloud import PointCloud
 from ..errors import DatabaseError, InputError, SemslamError
 from ..symmetry import Symmetry
 from .database import ClassInfo, ViewDatabase, _class_infos
-from .view_descriptors import (DEFAULT_NORMAL_RADIUS_M, DEFAULT_VOXEL_LEAF_M, ESF_BINS, VFH_BINS, ViewDescriptors,
+from .preprocessing import ViewPreprocessing
+from .view_descriptors import (DEFAULT_VOXEL_LEAF_M, ESF_BINS, VFH_BINS, ViewDescriptors,
                                _check_length, _is_auto, _vfh_default_variant, compute_view_descriptors,
+                               default_normal_radius,
                                resolve_descriptor_lengths)
 
 POINT_FILE_SUFFIXES = (".pcd", ".ply", ".npy")
@@ -27,11 +29,12 @@ POINT_FILE_SUFFIXES = (".pcd", ".ply", ".npy")
 
 
 def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mapping[str, Mapping[str, Any]], *,
-                   vfh_variant: str | None = None, normal_radius_m: float | str = DEFAULT_NORMAL_RADIUS_M,
+                   vfh_variant: str | None = None, normal_radius_m: float | str | None = None,
                    esf_n_samples: int = 20000, voxel_leaf_m: float | str | None = DEFAULT_VOXEL_LEAF_M,
                    seed: int | np.random.Generator = 0, progress: bool = False,
                    model_views: Sequence[tuple[str, str, PointCloud]] | None = None,
-                   mapper: Any = None) -> ViewDatabase:
+                   mapper: Any = None, preprocessing: ViewPreprocessing | Mapping[str, Any] | None = None,
+                   views_preprocessed: bool = False) -> ViewDatabase:
     """Compute the descriptors of partial views and gather them in a :class:`ViewDatabase`.
 
     Parameters
@@ -43,8 +46,11 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         One entry for every label in ``views`` (extra entries are an error too).
     vfh_variant : str, optional
         VFH binning variant passed to ``compute_vfh``; None = its default (the name is recorded).
-    normal_radius_m : float or "auto", default DEFAULT_NORMAL_RADIUS_M (0.015)
-        Radius of the normal estimation for the VFH, metres (3 voxels of the default grid). ``"auto"``:
+    normal_radius_m : float, "auto" or None
+        Radius of the normal estimation for the VFH, metres. None (default): from the views' own scale, 3 voxels
+        of a fixed ``voxel_leaf_m`` (the default 5 mm grid: DEFAULT_NORMAL_RADIUS_M, 15 mm); with no grid or an
+        "auto" one, the "auto" radius but at least 0.25 x the views' median bounding-box diagonal
+        (``NORMAL_EXTENT_FRACTION``; recorded as ``extent_m``): VFH on views of any size and unit. ``"auto"``:
         3 voxels of the auto grid (2.7 x the views' measured point spacing, or 3 x a larger fixed
         ``voxel_leaf_m``), and the VFH computed in a spacing-based unit (``vfh_scale``), see
         :func:`resolve_descriptor_lengths`: for views in another unit or from another sensor.
@@ -70,8 +76,21 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         ``mapper(fn, items, progress) -> [fn(item) for item in items]`` in order: runs the views' descriptors
         elsewhere (e.g. :func:`semslam.experiments._dask.map_tasks` on a Dask cluster); every view carries its own
         seed, so the database does not depend on it. Default: in this process.
+    preprocessing : ViewPreprocessing or dict, optional
+        What is done to every view before its descriptors (range limits, cleaning of sensor-origin points and
+        drawn lines: :class:`~semslam.recognition.preprocessing.ViewPreprocessing`). It is recorded in
+        ``params["preprocessing"]``, with the views' point spacing after the voxel grid, and
+        :meth:`ViewDatabase.describe` applies it to every query. None: nothing (recorded as such).
+    views_preprocessed : bool, default False
+        The views were already treated by ``preprocessing`` (e.g. cleaned while read): it is recorded, not
+        applied again.
     """
     caller = "build_database"
+    if normal_radius_m is None:  # from the views' own scale (issue #29, item 6): resolved with the views
+        normal_radius_m = default_normal_radius(voxel_leaf_m)
+        given_radius = None if _is_auto(normal_radius_m) else normal_radius_m
+    else:
+        given_radius = normal_radius_m
     if not _is_auto(normal_radius_m):  # lengths checked before the views; "auto" is measured once they are
         _check_length("normal_radius_m", normal_radius_m, caller)
     if not (_is_auto(voxel_leaf_m) or voxel_leaf_m is None):
@@ -88,7 +107,10 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     if unused:
         raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
     models = _check_model_views(model_views, class_infos, caller)
-    lengths = resolve_descriptor_lengths([v[2] for v in views], normal_radius_m=normal_radius_m,
+    prep = _as_preprocessing(preprocessing, caller).with_view_spacing(None)  # the spacing is measured below
+    if not (views_preprocessed or prep.is_identity):
+        views = [(label, view_id, _preprocess_view(prep, label, view_id, cloud)) for label, view_id, cloud in views]
+    lengths = resolve_descriptor_lengths([v[2] for v in views], normal_radius_m=given_radius,
                                          voxel_leaf_m=voxel_leaf_m, caller=caller)
     radius, leaf = lengths["normal_radius_m"], lengths["voxel_leaf_m"]
     variant = vfh_variant if vfh_variant is not None else _vfh_default_variant()
@@ -102,13 +124,16 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         esf[k], vfh[k] = d.esf, d.vfh
     counts = np.array([v[2].n_points for v in views], dtype=np.int64)
     params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
-              "seed": seed if isinstance(seed, int) else None}
+              "seed": seed if isinstance(seed, int) else None,
+              "preprocessing": prep.with_view_spacing(_views_spacing_m([v[2] for v in views], leaf)).to_dict()}
     if "spacing_m" in lengths:  # "auto": how the lengths were chosen
         params["spacing_m"] = lengths["spacing_m"]
         params["vfh_scale"] = lengths["vfh_scale"]
         params["auto"] = [name for name, value in (("normal_radius_m", normal_radius_m), ("voxel_leaf_m", voxel_leaf_m))
                           if _is_auto(value)]
         params["auto_rule"] = lengths["auto_rule"]
+        if "extent_m" in lengths:
+            params["extent_m"] = lengths["extent_m"]
     return ViewDatabase(
         labels=np.array([str(v[0]) for v in views]),
         view_ids=np.array([str(v[1]) for v in views]),
@@ -122,6 +147,53 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
                             else np.zeros((0, 3))).astype(np.float32),
         model_viewpoints_xyz_m=np.array([m[2].viewpoint_xyz_m for m in models], dtype=np.float64).reshape(-1, 3),
     )
+
+
+
+def _as_preprocessing(preprocessing: Any, caller: str) -> ViewPreprocessing:
+    if preprocessing is None:
+        return ViewPreprocessing()
+    if isinstance(preprocessing, ViewPreprocessing):
+        if not preprocessing.known:
+            raise InputError(f"The 'preprocessing' argument of {caller} must say what is done to the views: "
+                             f"ViewPreprocessing.unknown() only describes old database files.")
+        return preprocessing
+    if isinstance(preprocessing, Mapping):
+        try:
+            return ViewPreprocessing(**preprocessing)
+        except TypeError as exc:
+            raise InputError(f"The 'preprocessing' argument of {caller} has an unknown field: {exc}.") from None
+    raise InputError(f"The 'preprocessing' argument of {caller} must be a ViewPreprocessing, a dict of its fields or "
+                     f"None. Got {type(preprocessing).__name__} instead.")
+
+
+
+def _preprocess_view(prep: ViewPreprocessing, label: str, view_id: str, cloud: PointCloud) -> PointCloud:
+    try:
+        out = prep.apply(cloud, name=f"view ({label!r}, {view_id!r})")
+    except SemslamError as exc:
+        raise DatabaseError(str(exc)) from None
+    if out.n_points < 3:
+        raise DatabaseError(f"The view ({label!r}, {view_id!r}) has {out.n_points} point(s) left after its "
+                            f"preprocessing ({prep.describe()}): at least 3 are needed.")
+    return out
+
+
+
+def _views_spacing_m(clouds: Sequence[PointCloud], leaf: float | None) -> float | None:
+    """Median over the views of their point spacing after the voxel grid (None when no view can be measured)."""
+    from ..descriptors import point_spacing_m
+    from ..segmentation.voxel import voxel_downsample
+
+    spacings = []
+    for cloud in clouds:
+        pts = cloud.points_xyz_m if leaf is None else voxel_downsample(cloud.points_xyz_m, leaf)
+        if len(pts) > 4:
+            try:
+                spacings.append(point_spacing_m(pts, seed=0, sample=500))
+            except SemslamError:
+                pass
+    return float(np.median(spacings)) if spacings else None
 
 
 
@@ -178,19 +250,28 @@ def _check_view_items(items: Any, class_infos: Mapping[str, ClassInfo], caller: 
 
 
 
-def build_database_from_folder(views_dir: str | Path, *, clean: bool = True, **kwargs: Any) -> ViewDatabase:
+def build_database_from_folder(views_dir: str | Path, *, clean: bool = True,
+                               preprocessing: ViewPreprocessing | Mapping[str, Any] | None = None,
+                               **kwargs: Any) -> ViewDatabase:
     """Build a database from a folder ``views_dir/CLASS/VIEW.{pcd,ply,npy}`` of views in the object frame.
 
     An optional ``views_dir/classes.json`` maps labels to ``{"symmetry": {...Symmetry.to_dict()},
     "size_xyz_m": [x, y, z]}``; a class it does not describe gets symmetry ``none`` and the bounding box
     of all its views' points as size. Each file's ``VIEWPOINT`` is the view's sensor origin. Views are
     taken in sorted order. ``clean`` (default) drops points at the sensor origin (invalid depth) and drawn
-    lines (:func:`semslam.segmentation.clean.clean_view`). Keyword arguments go to :func:`build_database`.
+    lines (:func:`semslam.segmentation.clean.clean_view`); the cleaning is recorded in the database and applied
+    to every query (:attr:`ViewDatabase.preprocessing`). ``preprocessing`` (a
+    :class:`~semslam.recognition.preprocessing.ViewPreprocessing`, e.g. with range limits) replaces ``clean``.
+    Other keyword arguments go to :func:`build_database`.
     Views recorded in their own sensor frames are fused into one object frame by
     :func:`semslam.pipeline.fuse.build_fused_database` (``semslam db build --fuse``).
     """
-    views, declared, meta_path = read_view_folder(views_dir, clean=clean)
-    return build_database(views, folder_classes(views, declared, meta_path), **kwargs)
+    if preprocessing is None:  # cleaned while read (errors name the file), recorded
+        views, declared, meta_path = read_view_folder(views_dir, clean=clean)
+        return build_database(views, folder_classes(views, declared, meta_path),
+                              preprocessing=ViewPreprocessing(clean=bool(clean)), views_preprocessed=True, **kwargs)
+    views, declared, meta_path = read_view_folder(views_dir, clean=False)
+    return build_database(views, folder_classes(views, declared, meta_path), preprocessing=preprocessing, **kwargs)
 
 
 

@@ -18,7 +18,11 @@ File format (``FORMAT_NAME`` version ``FORMAT_VERSION``): an uncompressed ``.npz
   ``model_labels`` (M,) str, ``model_point_offsets`` (M+1,) int64, ``model_points_xyz_m`` (Q, 3) float32
   and ``model_viewpoints_xyz_m`` (M, 3) float64, laid out like the views (M may be 0).
 
-Version-1 files (no pose-model views) are still read: their classes' pose models are their views.
+Version 3 records in ``meta["params"]["preprocessing"]`` what was done to the views before their descriptors
+(cleaning, range limits, the views' spacing after the voxel grid; :mod:`~semslam.recognition.preprocessing`),
+which :meth:`ViewDatabase.describe` applies to every query. Version-2 files read with an unknown preprocessing
+(nothing applied to queries, as before). Version-1 files (no pose-model views) are still read: their classes'
+pose models are their views.
 
 This module holds the data model (:class:`ViewDatabase`, :class:`ClassInfo`) and its consistency checks; the
 descriptors are computed in :mod:`~semslam.recognition.view_descriptors`, databases built in
@@ -42,14 +46,15 @@ from .._validation import as_float_array, check_int
 from ..cloud import PointCloud
 from ..errors import DatabaseError, InputError, SemslamError
 from ..symmetry import Symmetry
+from .preprocessing import ViewPreprocessing
 from .view_descriptors import (AUTO, AUTO_RULE, DEFAULT_NORMAL_RADIUS_M, DEFAULT_VOXEL_LEAF_M, DESCRIPTORS, ESF_BINS,
                                VFH_BINS, ViewDescriptors, combine_descriptors, compute_view_descriptors,
                                resolve_descriptor_lengths)
 
 FORMAT_NAME = "semslam-view-database"
-FORMAT_VERSION = 2
-#: Older format versions :func:`load_database` still reads.
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: Older format versions :func:`load_database` still reads (their preprocessing reads as unknown).
+READABLE_VERSIONS = (1, 2, 3)
 _ARRAYS = ("labels", "view_ids", "point_offsets", "points_xyz_m", "viewpoints_xyz_m", "esf", "vfh")
 _MODEL_ARRAYS = ("model_labels", "model_point_offsets", "model_points_xyz_m", "model_viewpoints_xyz_m")
 
@@ -254,16 +259,27 @@ class ViewDatabase:
         return combine_descriptors(descriptor, self.esf, self.vfh)
 
     # -- queries --------------------------------------------------------------------------------
+    @property
+    def preprocessing(self) -> ViewPreprocessing:
+        """What was done to the views before their descriptors (``params["preprocessing"]``), and is done to every
+        query by :meth:`describe`: see :mod:`~semslam.recognition.preprocessing`. Databases of format versions 1
+        and 2 read as unknown (nothing applied); one built in memory without a record as none."""
+        return ViewPreprocessing.from_dict(self.params.get("preprocessing"), "The view database")
+
     def describe(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0,
                  concurrent: bool = True) -> ViewDescriptors:
         """Descriptors of a query cloud computed exactly as the stored views' (same parameters).
 
+        The database's recorded preprocessing (:attr:`preprocessing`: range limits, cleaning of sensor-origin
+        points and drawn lines) is applied to the query first, as it was to the views; a query it leaves empty,
+        or too sparse for the views' density, is a :class:`~semslam.errors.DescriptorError`.
         The database's voxel grid (``params["voxel_leaf_m"]``, if any) is applied to the query first, so
         that queries and views have the same point density (a cluster already on that grid, as
         :func:`~semslam.segmentation.segment_scene` outputs it, changes little). A database built with
         ``"auto"`` lengths describes queries with its resolved lengths and ``vfh_scale`` (``params``): queries
         must be in the views' unit.
         """
+        cloud = self.preprocessing.apply(cloud, name="query")
         return compute_view_descriptors(
             cloud, vfh_variant=self.params.get("vfh_variant"),
             normal_radius_m=self.params.get("normal_radius_m", DEFAULT_NORMAL_RADIUS_M),
@@ -304,6 +320,7 @@ class ViewDatabase:
             "descriptors": {"esf": {"bins": ESF_BINS, "n_samples": self.params.get("esf_n_samples")},
                             "vfh": {"bins": VFH_BINS, "variant": self.vfh_variant,
                                     "normal_radius_m": self.params.get("normal_radius_m")}},
+            "preprocessing": self.preprocessing.describe(),
             "params": dict(self.params),
         }
 

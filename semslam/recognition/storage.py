@@ -15,6 +15,7 @@ import numpy as np
 from .._atomic import atomic_open
 from ..errors import DatabaseError, InputError, SemslamError
 from ..symmetry import Symmetry
+from .preprocessing import ViewPreprocessing
 from .database import (_ARRAYS, _MODEL_ARRAYS, FORMAT_NAME, FORMAT_VERSION, READABLE_VERSIONS, ClassInfo,
                        ViewDatabase, _check_consistency)
 
@@ -83,6 +84,10 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
     if not isinstance(params, dict) or not all(v is None or isinstance(v, (str, int, float, bool, dict, list))
                                                for v in params.values()):
         raise DatabaseError(f"{where} has invalid descriptor parameters: expected a table, got {params!r:.80}.")
+    if version < 3:  # written before the views' preprocessing was recorded
+        params = {**params, "preprocessing": ViewPreprocessing.unknown().to_dict()}
+    else:  # a record this semslam cannot apply is refused now, not at the first query
+        ViewPreprocessing.from_dict(params.get("preprocessing"), where)
     if verify:
         checksums = meta.get("checksums", {})
         for name, arr in arrays.items():

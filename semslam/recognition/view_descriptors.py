@@ -59,6 +59,31 @@ AUTO_NORMAL_FACTOR = 3.0
 AUTO_REFERENCE_SPACING_M = 0.0056
 
 
+#: ``normal_radius_m=None`` (the default): this many voxels of a fixed voxel grid (the default 5 mm grid: 15 mm,
+#: :data:`DEFAULT_NORMAL_RADIUS_M`), else ``"auto"``, from the clouds' own measured spacing (issue #29, item 6: VFH
+#: on views of any size and unit, raw or on an "auto" grid).
+NORMAL_RADIUS_VOXELS = 3.0
+
+
+#: Without a fixed grid and without a given radius, the normal radius is at least this fraction of the median
+#: bounding-box diagonal of the views (dense real views: a radius of a few point spacings follows the sensor's
+#: noise, not the object's shape; measured with benchmarks/vfh_scale.py).
+NORMAL_EXTENT_FRACTION = 0.25
+
+
+SCALE_RULE = (f"normal radius not given and no fixed grid: normal_radius_m = max(the auto radius, "
+              f"{NORMAL_EXTENT_FRACTION} x the views' median bounding-box diagonal)")
+
+
+def default_normal_radius(voxel_leaf_m: Any) -> float | str:
+    """The normal radius used when none is given: :data:`NORMAL_RADIUS_VOXELS` voxels of a fixed ``voxel_leaf_m``
+    (a number), else ``"auto"`` (no grid, or an ``"auto"`` one: from the clouds' measured spacing)."""
+    if isinstance(voxel_leaf_m, (int, float, np.integer, np.floating)) and not isinstance(voxel_leaf_m, bool) \
+            and voxel_leaf_m > 0:
+        return NORMAL_RADIUS_VOXELS * float(voxel_leaf_m)
+    return AUTO
+
+
 AUTO_RULE = (f"spacing_m = median over views of point_spacing_m(k={AUTO_SPACING_K}); voxel_leaf_m = "
              f"{AUTO_VOXEL_FACTOR} x spacing_m; normal_radius_m = {AUTO_NORMAL_FACTOR} x max({AUTO_VOXEL_FACTOR} x "
              f"spacing_m, voxel_leaf_m); vfh_scale = {AUTO_REFERENCE_SPACING_M} / spacing_m (auto normal radius)")
@@ -111,7 +136,7 @@ def _is_auto(value: Any) -> bool:
 
 
 def resolve_descriptor_lengths(clouds: Sequence[PointCloud] | PointCloud, *,
-                               normal_radius_m: float | str = AUTO, voxel_leaf_m: float | str | None = AUTO,
+                               normal_radius_m: float | str | None = AUTO, voxel_leaf_m: float | str | None = AUTO,
                                caller: str = "resolve_descriptor_lengths") -> dict[str, Any]:
     """The normal radius and voxel leaf the descriptors of ``clouds`` use, with ``"auto"`` resolved.
 
@@ -122,6 +147,9 @@ def resolve_descriptor_lengths(clouds: Sequence[PointCloud] | PointCloud, *,
     database in millimetres, or from a sparser sensor, gets the same descriptors as one in metres. With an
     ``"auto"`` normal radius the VFH is also computed in a unit where the spacing is
     :data:`AUTO_REFERENCE_SPACING_M` (``vfh_scale``): PCL's VFH viewpoint part depends on the unit.
+    ``normal_radius_m=None`` is :func:`default_normal_radius`: 3 voxels of a fixed grid; without one, the
+    ``"auto"`` radius raised to at least :data:`NORMAL_EXTENT_FRACTION` of the clouds' median bounding-box diagonal
+    (then also ``extent_m`` is returned).
 
     Returns
     -------
@@ -139,6 +167,9 @@ def resolve_descriptor_lengths(clouds: Sequence[PointCloud] | PointCloud, *,
     """
     from ..descriptors import point_spacing_m
 
+    scale_radius = normal_radius_m is None and _is_auto(default_normal_radius(voxel_leaf_m))
+    if normal_radius_m is None:
+        normal_radius_m = default_normal_radius(voxel_leaf_m)
     auto_radius, auto_leaf = _is_auto(normal_radius_m), _is_auto(voxel_leaf_m)
     radius = None if auto_radius else _check_length("normal_radius_m", normal_radius_m, caller)
     leaf = None if auto_leaf or voxel_leaf_m is None else _check_length("voxel_leaf_m", voxel_leaf_m, caller)
@@ -161,9 +192,16 @@ def resolve_descriptor_lengths(clouds: Sequence[PointCloud] | PointCloud, *,
         leaf = AUTO_VOXEL_FACTOR * spacing
     if auto_radius:
         radius = AUTO_NORMAL_FACTOR * max(AUTO_VOXEL_FACTOR * spacing, leaf or 0.0)
-    return {"normal_radius_m": float(radius), "voxel_leaf_m": None if leaf is None else float(leaf),
-            "vfh_scale": AUTO_REFERENCE_SPACING_M / spacing if auto_radius else 1.0,
-            "spacing_m": spacing, "auto_rule": AUTO_RULE}
+    out = {"normal_radius_m": float(radius), "voxel_leaf_m": None if leaf is None else float(leaf),
+           "vfh_scale": AUTO_REFERENCE_SPACING_M / spacing if auto_radius else 1.0,
+           "spacing_m": spacing, "auto_rule": AUTO_RULE}
+    if scale_radius:  # no radius given, no fixed grid: at least a fraction of the views' size (item 6 of issue #29)
+        diagonals = [float(np.linalg.norm(np.ptp(c.points_xyz_m, axis=0))) for c in clouds if c.n_points > 1]
+        size = float(np.median(diagonals)) if diagonals else 0.0
+        out["normal_radius_m"] = float(max(radius, NORMAL_EXTENT_FRACTION * size))
+        out["extent_m"] = size
+        out["auto_rule"] = AUTO_RULE + "; " + SCALE_RULE
+    return out
 
 
 
@@ -176,7 +214,7 @@ def _check_length(name: str, value: Any, caller: str) -> float:
 
 
 def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = None,
-                             normal_radius_m: float | str = DEFAULT_NORMAL_RADIUS_M,
+                             normal_radius_m: float | str | None = None,
                              esf_n_samples: int = 20000, voxel_leaf_m: float | str | None = None,
                              seed: int | np.random.Generator = 0, concurrent: bool = True,
                              vfh_scale: float | None = None) -> ViewDescriptors:
@@ -200,8 +238,10 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
         ESF and VFH do not depend on the frame, VFH's viewpoint part only on the viewpoint relative to it).
     vfh_variant : str, optional
         Passed to ``compute_vfh(variant=...)``; None uses its default.
-    normal_radius_m : float or "auto"
-        Metres; ``"auto"``: from this cloud's measured spacing (:func:`resolve_descriptor_lengths`).
+    normal_radius_m : float, "auto" or None
+        Metres; ``"auto"``: from this cloud's measured spacing (:func:`resolve_descriptor_lengths`). None (default):
+        3 voxels of a fixed ``voxel_leaf_m``, else the "auto" radius but at least :data:`NORMAL_EXTENT_FRACTION` of
+        the cloud's bounding-box diagonal.
     esf_n_samples : int
     voxel_leaf_m : float or "auto", optional
         Voxel edge (metres) of the grid applied before both descriptors; None keeps every point;
