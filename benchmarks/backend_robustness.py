@@ -67,7 +67,7 @@ def run(n_runs: int, seed0: int, fraction: float, huber_k: float, settings=tuple
             variants[s] = corrupt_detections(dets, fraction=fraction, seed=seed + 10_000, **SETTINGS[s])[0]
         for v, d in variants.items():
             for name, (b, k) in bk.items():
-                res = run_slam(mission, d, mode="pose", config=cfg, seed=seed, symmetries=sym, backend=b, huber_k=k)
+                res = run_slam(mission, d, mode="pose", config=cfg, symmetries=sym, backend=b, huber_k=k)
                 r = rows[(v, name)]
                 on, end = _ates(res, b)
                 r["on"].append(on)

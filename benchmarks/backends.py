@@ -29,8 +29,8 @@ from semslam.slam import SlamConfig
 from semslam.slam.metrics import anees, nees
 
 SCENARIOS = {
-    "default": dict(mode="pose", yaw_bias_deg=0.0, overrides={}),
-    "heading": dict(mode="pose+heading", yaw_bias_deg=2.0, overrides={"surveyed_objects": ("elbow_1",)}),
+    "default": dict(mode="pose", yaw_bias_deg=0.0, overrides={}, surveyed=()),
+    "heading": dict(mode="pose+heading", yaw_bias_deg=2.0, overrides={}, surveyed=("elbow_1",)),
 }
 
 
@@ -45,7 +45,7 @@ def run_scenario(name: str, n_runs: int, backends, seed0: int = 0) -> dict:
         mission = make_mission(seed, yaw_bias_rad=math.radians(sc["yaw_bias_deg"]))
         for b in backends:
             t0 = time.perf_counter()
-            res = truth_run(mission, sc["mode"], cfg, seed, b)
+            res = truth_run(mission, sc["mode"], cfg, seed, b, sc["surveyed"])
             wall = time.perf_counter() - t0
             truth = res.truth_position_ned_m
             r = rows[b]

@@ -3,9 +3,9 @@
 Simulates a dive of ``--minutes`` (loops of the default tank mission, scans every 0.5 s whatever is in view:
 2 Hz, ``--lines`` x ``--lines`` rays per scan), writes it as a ROS 2 mcap bag as a vehicle would record it, then
 runs ``semslam run BAG --db builtin --mode pose`` in a child process and reports its wall time, the real-time
-factor and the child's peak RSS (``VmHWM`` of ``/proc/PID/status``). The bag is converted to a mission
-directory with scans streamed to disk one by one, then every scan is recognised one at a time, so memory is
-bounded by one scan plus the navigation logs (a few MB per hour).
+factor and the child's peak RSS (``VmHWM`` of ``/proc/PID/status``). The bag is streamed through the runner
+(:mod:`semslam.run`): nothing is converted on disk and no scan written; every scan is recognised as it comes, so
+memory is bounded by one scan, the delay line and the navigation history (a few MB per hour).
 
     .venv/bin/python benchmarks/bag_stream.py --minutes 30 --lines 100 --work /tmp/bagbench
 """
@@ -29,7 +29,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     from semslam.dataset import write_vehicle_toml
-    from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
+    from semslam.dataset.rosbag_write import topic_map_of, write_bag
     from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, simulate_mission
 
     work = Path(args.work)
@@ -48,7 +48,7 @@ def main() -> None:
     bag = write_bag(mission, work / "dive", "ros2-mcap")
     t_bag = time.perf_counter() - t
     write_vehicle_toml(mission.vehicle, work / "vehicle.toml")
-    (work / "topics.toml").write_text(SEMSLAM_TOPICS.to_toml())
+    (work / "topics.toml").write_text(topic_map_of(mission).to_toml())
     size_mb = sum(f.stat().st_size for f in bag.rglob("*") if f.is_file()) / 1e6
     n_scans, n_points = len(mission.scans), sum(s.n_points for s in mission.scans)
     del mission

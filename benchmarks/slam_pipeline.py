@@ -37,7 +37,7 @@ def main() -> None:
         dets = detect_mission(mission, recognizer, seed=seed).detections_by_scan  # reliable only, as the demo
         cells = []
         for mode in MODES:
-            r = run_slam(mission, dets, mode=mode, seed=seed, symmetries=builtin_symmetries())
+            r = run_slam(mission, dets, mode=mode, symmetries=builtin_symmetries())
             ate[mode].append((r.metrics["ate_rmse_m"], r.metrics["smoother"]["ate_rmse_m"]))
             cells.append(f"{ate[mode][-1][0]:.4f} / {ate[mode][-1][1]:.4f}")
         print(f"| {seed} | " + " | ".join(cells) + " |", flush=True)

@@ -131,7 +131,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         objects = read_models(cfg.models_dir)
     # built beside the target and swapped in at the end: a killed demo leaves the previous run intact, and only a
     # directory semslam wrote is ever replaced (semslam._outdir)
-    with staged_output_dir(final, overwrite=overwrite, kind="demo") as out:
+    with staged_output_dir(final, overwrite=overwrite, kind="demo", inputs=(cfg.models_dir,)) as out:
         stages = _Stages(log)
         t_start = time.perf_counter()
 
@@ -259,7 +259,7 @@ def _run_slam_modes(mission, detections_by_scan: dict, cfg: DemoConfig, out: Pat
     results = {}
     symmetries = builtin_symmetries() if symmetries is None else symmetries
     for mode in cfg.modes:
-        res = run_slam(mission, detections_by_scan, mode=mode, seed=cfg.seed, symmetries=symmetries)
+        res = run_slam(mission, detections_by_scan, mode=mode, symmetries=symmetries)
         write_run(res, mode_dir(out, mode))
         results[mode] = res
     return results

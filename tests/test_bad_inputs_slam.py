@@ -81,8 +81,7 @@ def test_from_dict_non_table_input_and_section():
      ("'velocity_rw_mps_per_sqrt_s'", "three finite numbers >= 0", "nan")),
     ("motion", "velocity_rw_mps_per_sqrt_s", "0.1", ("'velocity_rw_mps_per_sqrt_s'", "a number or three", "'0.1'")),
     ("motion", "velocity_rw_mps_per_sqrt_s", True, ("'velocity_rw_mps_per_sqrt_s'", "a number or three", "True")),
-    ("initialisation", "surveyed_objects", "elbow_1", ("'surveyed_objects'", "sequence of object names",
-                                                       "'elbow_1'")),
+    ("initialisation", "max_fix_age_s", 0.0, ("'max_fix_age_s'", "must be > 0", "0.0")),
 ])
 def test_from_dict_bad_value_names_source_field_expectation_and_value(section, key, value, words):
     """Catches truthy strings ("false" read as True), bools taken as numbers, NaN slipping into the filter and
@@ -311,18 +310,24 @@ def test_run_slam_bad_mode(dataset):
         run_slam(dataset, mode="full")
 
 
-def test_run_slam_surveyed_object_not_in_the_dataset(dataset):
-    """Catches a typo'd surveyed object being dropped, the run then silently unsurveyed."""
-    cfg = SlamConfig().updated(surveyed_objects=["elbow_1", "no_such_object"])
-    with pytest.raises(SlamError, match=_words("'surveyed_objects'", "objects of the mission", "'elbow_1'",
-                                               "Got ['no_such_object']")):
-        run_slam(dataset, mode="dr", config=cfg)
+def test_survey_file_errors_name_the_file_and_the_problem(tmp_path):
+    """A survey file with a wrong header, a non-number or a non-positive sigma is a one-line error naming it."""
+    from semslam.errors import InputError
+    from semslam.slam import read_survey
 
-
-@pytest.mark.parametrize("seed", [-1, True, "0"])
-def test_run_slam_bad_seed(dataset, seed):
-    with pytest.raises(InputError, match=_words("'seed'", "run_slam", "non-negative integer", f"Got {seed!r}")):
-        run_slam(dataset, mode="dr", seed=seed)
+    bad = tmp_path / "survey.csv"
+    bad.write_text("name,label,x,y\n")
+    with pytest.raises(InputError, match=_words("survey.csv", "header", "name,label,x_m,y_m,z_m")):
+        read_survey(bad)
+    bad.write_text("name,label,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad\nv,valve,1,2,x,0,0,0\n")
+    with pytest.raises(InputError, match=_words("survey.csv", "line 2", "numbers")):
+        read_survey(bad)
+    bad.write_text("name,label,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,position_sigma_m,rotation_sigma_rad\n"
+                   "v,valve,1,2,3,0,0,0,0,0.1\n")
+    with pytest.raises(InputError, match=_words("survey.csv", "line 2", "sigmas must be > 0")):
+        read_survey(bad)
+    with pytest.raises(InputError, match=_words("does not exist")):
+        read_survey(tmp_path / "nothing.csv")
 
 
 # ------------------------------------------------------------------ run_montecarlo

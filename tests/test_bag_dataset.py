@@ -100,7 +100,7 @@ def test_topic_map_errors_name_the_topic_and_the_bag(mission, tmp_path):
     missing = replace(SEMSLAM_TOPICS, dvl="/dvl/nothing")
     with pytest.raises(BagError, match=r"topic '/dvl/nothing' not found.*/semslam/imu"):
         export_bag(bag, tmp_path / "x", topic_map=missing, vehicle=mission.vehicle)
-    wrong = replace(SEMSLAM_TOPICS, attitude="/semslam/pressure")
+    wrong = replace(SEMSLAM_TOPICS, attitude="/semslam/pressure", depth=None)  # one sensor per topic
     with pytest.raises(BagError, match=r"'/semslam/pressure' must have type sensor_msgs/msg/Imu"):
         export_bag(bag, tmp_path / "x", topic_map=wrong, vehicle=mission.vehicle)
     assert not (tmp_path / "x").exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".x")]

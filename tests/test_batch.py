@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from semslam._outdir import MARKER
+from semslam._outdir import MARKER, is_owned
 from semslam.cli.cmd_batch import process_dive
 from semslam.experiments.batch import INDEX, SUMMARY_CSV, SUMMARY_MD, TIMINGS, run_batch
 
@@ -58,7 +58,8 @@ def serial_runs(dives, tmp_path_factory):
 
 
 def _tree(root: Path) -> dict:
-    return {p.relative_to(root): p for p in sorted(root.rglob("*")) if p.is_file()}
+    """Every file but the ownership markers (each holds an id drawn for its directory: semslam._outdir)."""
+    return {p.relative_to(root): p for p in sorted(root.rglob("*")) if p.is_file() and p.name != MARKER}
 
 
 def _differing(a: Path, b: Path, exclude=(TIMINGS,)) -> list:
@@ -74,7 +75,7 @@ def test_corrupt_dive_fails_alone(serial_runs, dives):
     assert res.n_failed == 1
     assert "mission.json" in res.rows[1]["error"] and "DatasetError" in res.rows[1]["error"]
     for r in (res.rows[0], res.rows[2]):
-        assert (res.out / r["dive"] / MARKER).is_file()
+        assert is_owned(res.out / r["dive"], "run")
         assert r["duration_s"] > 10 and r["modes"]["pose"]["ate_m"] > 0 and r["detections"] >= 0
     assert not (res.out / "corrupt").exists()
     csv = (res.out / SUMMARY_CSV).read_text().splitlines()
@@ -103,13 +104,15 @@ def test_rerun_skips_complete_dives_and_redoes_half_written_ones(serial_runs, di
     shutil.copytree(serial_runs.out, out)
     # dive2 was interrupted half-way: only its staged sibling exists, never a marked run directory
     shutil.rmtree(out / "dive2")
-    (out / ".dive2.interrupted.tmp").mkdir()
-    (out / ".dive2.interrupted.tmp" / "detections.jsonl").write_text("half")
+    (out / ".dive2.semslam-1-interrupted.tmp").mkdir()
+    (out / ".dive2.semslam-1-interrupted.tmp" / "detections.jsonl").write_text("half")
     before = (out / "dive1" / "slam" / "pose" / "metrics.json").stat().st_mtime_ns
     res = run_batch(paths, out, process_dive, options={**OPTIONS, "db": db}, jobs=1)
     assert [t[0] for t in res.timings] == ["skipped", "failed", "processed"]
     assert (out / "dive1" / "slam" / "pose" / "metrics.json").stat().st_mtime_ns == before
-    assert not (out / ".dive2.interrupted.tmp").exists()
+    # another process's staging folder is not this one's to remove (semslam._outdir): the user removes it
+    assert (out / ".dive2.semslam-1-interrupted.tmp" / "detections.jsonl").read_text() == "half"
+    shutil.rmtree(out / ".dive2.semslam-1-interrupted.tmp")
     assert _differing(serial_runs.out, out) == []  # the same tables whether a dive was kept or redone
     res = run_batch(paths[:1], out, process_dive, options={**OPTIONS, "db": db}, overwrite=True)
     assert [t[0] for t in res.timings] == ["processed"]
@@ -139,8 +142,9 @@ def test_worker_killed_mid_dive_is_retried_and_batch_completes(serial_runs, dive
     t.join()
     assert killed and staged, "no worker was killed mid-dive"
     assert [r["status"] for r in res.rows] == ["ok", "ok"]
-    assert all((runs / n / MARKER).is_file() for n in ("dive1", "dive2"))
-    assert not list(runs.glob(".*.tmp"))  # the killed attempt's staging is gone
+    assert all(is_owned(runs / n, "run") for n in ("dive1", "dive2"))
+    # only the killed worker's staging can be left (no other process removes it); the re-run's own is gone
+    assert all(f".semslam-{killed[0]}-" in p.name for p in runs.glob(".*.tmp")), list(runs.glob(".*.tmp"))
     for n in ("dive1", "dive2"):  # the re-run dive's files are those of the serial batch
         assert _differing(serial_runs.out / n, runs / n) == []
     client.wait_for_workers(2, timeout=120)
@@ -165,7 +169,7 @@ def test_cli_batch_exit_status_and_errors(serial_runs, dives, tmp_path, capsys):
 
 
 def test_bag_dive_without_ground_truth(dives, tmp_path):
-    """A ROS 1 bag as a vehicle records it: converted in its run directory, no ATE in the summary."""
+    """A ROS 1 bag as a vehicle records it: streamed (nothing converted on disk), no ATE in the summary."""
     from semslam.dataset import write_vehicle_toml
     from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
     from semslam.simulation import SimulatorConfig, simulate_mission
@@ -181,5 +185,6 @@ def test_bag_dive_without_ground_truth(dives, tmp_path):
     (row,) = res.rows
     assert row["dive"] == "dive5" and row["status"] == "ok", row
     assert row["modes"]["pose"]["ate_m"] is None and row["duration_s"] > 10
-    assert (tmp_path / "runs" / "dive5" / "mission").is_dir()
+    assert not (tmp_path / "runs" / "dive5" / "mission").exists()
+    assert (tmp_path / "runs" / "dive5" / "run.json").is_file()
     assert (tmp_path / "runs" / SUMMARY_CSV).read_text().splitlines()[1].startswith("dive5,ok,")

@@ -28,7 +28,7 @@ from semslam.dataset import (
 )
 from semslam.errors import DatasetError, SemslamError, SlamError
 from semslam.geometry import RigidTransform
-from semslam.slam import SlamConfig, SlamSession, feed_message, merged_messages, run_slam
+from semslam.slam import SlamConfig, SlamSession, initial_state_of, feed_message, merged_messages, run_slam
 
 
 def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
@@ -50,9 +50,8 @@ def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
 def test_a_numpy_dataset_runs_through_slam_session_and_run_slam():
     """run_slam is the loop over the session: the same numbers; dead reckoning tracks the straight run."""
     ds = numpy_dive()
-    a = run_slam(ds, mode="dr", config=SlamConfig().updated(perturb_initial_position=False))
-    s = SlamSession(ds.vehicle, mode="dr", config=SlamConfig().updated(perturb_initial_position=False), start_stamp_s=0.0,
-                    initial_position_ned_m=[0.0, 0.0, 3.0], initial_velocity_body_mps=ds.dvl.velocity_body_mps[0])
+    a = run_slam(ds, mode="dr", config=SlamConfig())
+    s = SlamSession(ds.vehicle, mode="dr", config=SlamConfig(), start=initial_state_of(ds))
     for t, kind, payload in merged_messages(ds, {}):
         if kind == "attitude":
             s.add_attitude(t, *payload)
@@ -92,17 +91,14 @@ def test_simulated_mission_same_run_in_memory_from_disk_and_streamed(sim_mission
 
     sym = builtin_symmetries()
     dets = simulate_detections(sim_mission, truth_detection_config(sim_mission), seed=1, symmetries=sym)
-    cfg = SlamConfig().updated(perturb_initial_position=False)
+    cfg = SlamConfig()
     a = run_slam(sim_mission, dets, mode="pose", config=cfg, symmetries=sym)
     back = read_mission(write_mission(sim_mission, tmp_path / "m"))
     assert back.dvl.beam_range_m is not None and back.vehicle.to_dict() == sim_mission.vehicle.to_dict()
     b = run_slam(back, dets, mode="pose", config=cfg, symmetries=sym)
     np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-9)
     np.testing.assert_allclose(b.smoothed_position_ned_m, a.smoothed_position_ned_m, atol=1e-9)
-    t0 = float(sim_mission.attitude.stamp_s[0])
-    v0 = sim_mission.dvl.velocity_body_mps[np.flatnonzero(sim_mission.dvl.valid)[0]]
-    s = SlamSession(sim_mission.vehicle, mode="pose", config=cfg, symmetries=sym, start_stamp_s=t0,
-                    initial_position_ned_m=sim_mission.truth.interpolate_position(t0)[0], initial_velocity_body_mps=v0)
+    s = SlamSession(sim_mission.vehicle, mode="pose", config=cfg, symmetries=sym, start=initial_state_of(sim_mission))
     _stream(s, sim_mission, dets, attitude_lead_s=0.5)
     c = s.finish()
     np.testing.assert_array_equal(c.position_ned_m, a.position_ned_m)
@@ -313,11 +309,11 @@ def test_far_future_and_early_messages_are_skipped_and_counted():
     from semslam.detection import Detection
 
     ds = numpy_dive(duration_s=5.0)
-    base = run_slam(ds, {}, mode="pose", config=SlamConfig().updated(perturb_initial_position=False))
+    base = run_slam(ds, {}, mode="pose", config=SlamConfig())
     det = Detection("elbow", 0.1, RigidTransform.from_xyz_rpy([0, 0, 1.0], [0, 0, 0]), np.eye(6) * 1e-4,
                     stamp_s=1e9, scan_id=0)
     t = _time.perf_counter()
-    res = run_slam(ds, {0: [det]}, mode="pose", config=SlamConfig().updated(perturb_initial_position=False))
+    res = run_slam(ds, {0: [det]}, mode="pose", config=SlamConfig())
     assert _time.perf_counter() - t < 30
     assert res.metrics["skipped_beyond_attitude"] == 1
     np.testing.assert_array_equal(res.position_ned_m, base.position_ned_m)

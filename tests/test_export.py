@@ -163,7 +163,7 @@ def test_landmarks_json(run, tmp_path: Path) -> None:
         raise AssertionError(f"non-standard JSON constant {name}")
 
     doc = json.loads(text, parse_constant=no_nan)
-    assert doc["format"] == "semslam-map" and doc["format_version"] == 1
+    assert doc["format"] == "semslam-map" and doc["format_version"] == 2
     assert doc["covariance_order"] == ["x", "y", "z", "roll", "pitch", "yaw"]
     assert len(doc["landmarks"]) == len(r.landmarks)
     assert doc["classes"] == {label: i for i, label in enumerate(sorted({lm.label for lm in r.landmarks}))}

@@ -39,7 +39,7 @@ def dets(mission):
 
 @pytest.fixture(scope="module")
 def linear_runs(mission, dets):
-    return {b: run_slam(mission, dets, mode="position", seed=3, backend=b, symmetries={}, config=LINEAR)
+    return {b: run_slam(mission, dets, mode="position", backend=b, symmetries={}, config=LINEAR)
             for b in ("ekf", "isam2", "batch")}
 
 
@@ -101,7 +101,7 @@ def test_isam2_estimate_at_any_time_is_the_filter_estimate(mission, dets):
 
 
 def test_pose_mode_isam2_relinearises_to_the_batch_optimum(mission, dets):
-    r = {b: run_slam(mission, dets, mode="pose", seed=3, backend=b, symmetries={}) for b in ("ekf", "isam2", "batch")}
+    r = {b: run_slam(mission, dets, mode="pose", backend=b, symmetries={}) for b in ("ekf", "isam2", "batch")}
     truth = r["ekf"].truth_position_ned_m
     ate = {b: float(np.sqrt(np.mean(np.sum((x.smoothed_position_ned_m - truth) ** 2, axis=1)))) for b, x in r.items()}
     online = float(np.sqrt(np.mean(np.sum((r["ekf"].position_ned_m - truth) ** 2, axis=1))))
@@ -115,8 +115,8 @@ def test_pose_mode_isam2_relinearises_to_the_batch_optimum(mission, dets):
 
 
 def test_huber_kernel_runs_and_gives_the_same_map_on_clean_data(mission, dets):
-    plain = run_slam(mission, dets, mode="pose", seed=3, backend="batch", symmetries={})
-    rob = run_slam(mission, dets, mode="pose", seed=3, backend="batch", symmetries={}, huber_k=3.0)
+    plain = run_slam(mission, dets, mode="pose", backend="batch", symmetries={})
+    rob = run_slam(mission, dets, mode="pose", backend="batch", symmetries={}, huber_k=3.0)
     assert rob.metrics["graph"]["huber_k"] == 3.0
     assert _dmax(rob.smoothed_position_ned_m, plain.smoothed_position_ned_m) < 0.01
 
@@ -137,15 +137,15 @@ def test_non_psd_detection_covariance_is_a_slam_error_naming_it(mission, dets):
 def test_a_landmark_seen_once_never_enters_the_graph(mission, dets):
     first = min(dets)
     one = {first: dets[first][:1]}
-    r = run_slam(mission, one, mode="pose", seed=3, backend="isam2", symmetries={})
+    r = run_slam(mission, one, mode="pose", backend="isam2", symmetries={})
     assert r.landmarks == [] and r.metrics["graph"]["n_landmarks"] == 0
     assert [x["kind"] for x in r.update_log if x["kind"] in ("candidate", "new_landmark")] == ["candidate"]
 
 
 def test_a_dive_without_detections_is_dead_reckoning(mission):
-    dr = run_slam(mission, {}, mode="dr", seed=3, backend="ekf", config=LINEAR)
+    dr = run_slam(mission, {}, mode="dr", backend="ekf", config=LINEAR)
     for b in ("isam2", "batch"):
-        g = run_slam(mission, {}, mode="pose", seed=3, backend=b, config=LINEAR)
+        g = run_slam(mission, {}, mode="pose", backend=b, config=LINEAR)
         assert g.landmarks == []
         assert _dmax(g.position_ned_m, dr.position_ned_m) < 1e-8
         assert _dmax(g.smoothed_position_ned_m, dr.smoothed_position_ned_m) < 1e-6
@@ -197,7 +197,7 @@ def test_batch_equals_the_rts_smoother_with_rpy_orientation_innovations(mission,
     landmark orientations (measured: 7e-11 m, 5e-11 rad). Catches a generic factor that drops its Jacobians or
     reads the wrong landmark (mutation survivors ``graph/factors.py:159-161``)."""
     cfg = LINEAR.updated(orientation_innovation="rpy")
-    e, b = (run_slam(mission, dets, mode="pose", seed=3, backend=k, symmetries={}, config=cfg) for k in ("ekf", "batch"))
+    e, b = (run_slam(mission, dets, mode="pose", backend=k, symmetries={}, config=cfg) for k in ("ekf", "batch"))
     assert len(b.landmarks) == len(e.landmarks) >= 3
     assert _dmax(e.smoothed_position_ned_m, e.position_ned_m) > 1e-3
     assert _dmax(b.smoothed_position_ned_m, e.smoothed_position_ned_m) < 1e-6

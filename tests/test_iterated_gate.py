@@ -214,8 +214,8 @@ def test_large_yaw_bias_no_longer_duplicates_the_surveyed_landmark(bias_deg, sig
     from semslam.experiments.montecarlo import make_mission, truth_run
 
     mission = make_mission(seed, yaw_bias_rad=math.radians(bias_deg))
-    cfg = SlamConfig().updated(surveyed_objects=("elbow_1",), yaw_bias_sigma_rad=math.radians(sigma_deg))
-    res = truth_run(mission, "pose+heading", cfg, seed, backend)
+    cfg = SlamConfig().updated(yaw_bias_sigma_rad=math.radians(sigma_deg))
+    res = truth_run(mission, "pose+heading", cfg, seed, backend, surveyed=("elbow_1",))
     objects = collections.Counter(lm.matched_object for lm in res.landmarks)
     assert len(res.landmarks) == 4 and max(objects.values()) == 1
     surveyed = res.landmarks[0]

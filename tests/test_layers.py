@@ -10,9 +10,10 @@ Layers, bottom to top (a module may import its own layer and those below):
 3. ``recognition``, ``registration``
 4. ``pipeline`` (scan -> detections)
 5. ``slam`` (detections + navigation -> map)
-6. ``simulation`` (produces datasets)
-7. ``experiments``, ``report``, ``demo``
-8. ``cli``
+6. ``run`` (sources -> runner -> sinks; the ROS node sits on it)
+7. ``simulation`` (produces datasets)
+8. ``experiments``, ``report``, ``demo``
+9. ``cli``
 """
 
 from __future__ import annotations
@@ -27,17 +28,19 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "semslam"
 
 LAYERS = {
-    "geometry": 0, "cloud": 0, "detection": 0, "errors": 0, "symmetry": 0, "_validation": 0, "_atomic": 0,
+    "geometry": 0, "geodesy": 0, "cloud": 0, "detection": 0, "errors": 0, "symmetry": 0, "_validation": 0, "_atomic": 0,
     "_pipeline_kernels": 0, "_jsonable": 0, "_tables": 0, "_progress": 0, "_outdir": 0, "_workers": 0, "_cache": 0,
+    "limits": 0,
     "__init__": 0,
     "io": 1, "dataset": 1,
     "segmentation": 2, "descriptors": 2,
     "recognition": 3, "registration": 3,
     "pipeline": 4,
     "slam": 5,
-    "simulation": 6,
-    "experiments": 7, "report": 7, "demo": 7,
-    "cli": 8,
+    "run": 6,
+    "simulation": 7,
+    "experiments": 8, "report": 8, "demo": 8,
+    "cli": 9,
 }
 
 

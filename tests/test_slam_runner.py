@@ -113,8 +113,8 @@ def test_detections_jsonl_round_trip_gives_the_same_run(tmp_path, mission):
     write_detections_jsonl(tmp_path / "d.jsonl", dets)
     back = read_detections_jsonl(tmp_path / "d.jsonl")
     assert sorted(back) == sorted(dets)
-    a = run_slam(mission, dets, mode="pose", seed=0, symmetries={})
-    b = run_slam(mission, back, mode="pose", seed=0, symmetries={})
+    a = run_slam(mission, dets, mode="pose", symmetries={})
+    b = run_slam(mission, back, mode="pose", symmetries={})
     np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-9)
 
 
@@ -176,13 +176,13 @@ def test_each_detection_is_processed_at_its_own_stamp(mission):
         merged.setdefault(ids[k - k % 2], []).extend(dets[sid])
     assert len(merged) < len(dets)
     assert any(len({d.stamp_s for d in v}) > 1 for v in merged.values())
-    a = run_slam(mission, dets, mode="pose", seed=0, symmetries={})
-    b = run_slam(mission, merged, mode="pose", seed=0, symmetries={})
+    a = run_slam(mission, dets, mode="pose", symmetries={})
+    b = run_slam(mission, merged, mode="pose", symmetries={})
     np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-12)
     assert b.metrics["landmark_updates"] == a.metrics["landmark_updates"]
     bad = {ids[0]: [replace(dets[ids[0]][0], stamp_s=float("nan"))]}
     with pytest.raises(SlamError, match="stamp_s"):
-        run_slam(mission, bad, mode="pose", seed=0, symmetries={})
+        run_slam(mission, bad, mode="pose", symmetries={})
 
 
 def test_interpolated_attitude_noise_is_scaled(mission):

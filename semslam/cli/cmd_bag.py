@@ -21,7 +21,7 @@ def register(subparsers, common) -> None:
     exp.add_argument("--topics", help="topic map (TOML; default: `semslam bag info`'s suggestion)")
     exp.add_argument("--vehicle", help="vehicle description (TOML; default: the Girona 500-class defaults)")
     exp.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="as for `bag info`")
-    exp.add_argument("--overwrite", action="store_true", help="replace MISSION if it exists")
+    exp.add_argument("--overwrite", action="store_true", help="replace MISSION if semslam wrote it")
     exp.set_defaults(func=run_export)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -50,10 +50,14 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
+    from .._outdir import check_output_dir
     from ..dataset import read_vehicle_toml
     from ..dataset.rosbag import export_bag, read_topic_map
     from ._output import emit
 
+    # before the work: only an earlier mission semslam wrote is replaced, never an input (semslam._outdir)
+    check_output_dir(args.out, overwrite=args.overwrite, kind="mission",
+                     inputs=(args.bag, args.topics, args.vehicle, *args.msg_dir))
     tmap = read_topic_map(args.topics) if args.topics else None
     vehicle = read_vehicle_toml(args.vehicle) if args.vehicle else None
     out = export_bag(args.bag, args.out, topic_map=tmap, vehicle=vehicle, msg_dirs=args.msg_dir,

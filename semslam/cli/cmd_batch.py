@@ -12,6 +12,9 @@ BACKENDS = ("ekf", "isam2", "batch")  #: as `semslam run --backend`
 
 
 def register(subparsers, common) -> None:
+    from ._inputs import add_config_options
+    from ._scheduler_tls import add_tls_options
+
     p = subparsers.add_parser("batch", parents=[common], help="detect + SLAM + report on many dives, on Dask",
                               description="Run the whole chain (`semslam run`) on many dives (ROS bags or mission "
                                           "directories) in parallel: one run directory per dive in RUNS, a summary "
@@ -22,47 +25,62 @@ def register(subparsers, common) -> None:
     p.add_argument("--db", required=True, metavar="DB", help="view database (.npz), or 'builtin'")
     p.add_argument("--out", required=True, metavar="RUNS", help="directory of the run directories and the summary")
     p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="address of a running Dask scheduler (tcp://host:8786); default: a local cluster")
+                   help="address of a running Dask scheduler: tls://host:8786 with --tls-* certificates, or "
+                        "tcp://host:8786 (unauthenticated: trusted networks only); default: a local cluster")
+    add_tls_options(p)
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="worker processes of the local cluster (default: one per core; 1: serial, in this process; "
                         "ignored with --scheduler)")
     p.add_argument("--overwrite", action="store_true", help="re-process dives whose run directory is complete")
-    p.add_argument("--mode", default="all", help="SLAM mode: dr, position, pose, pose+heading or all (default)")
-    p.add_argument("--seed", type=int, default=0, help="seed of recognition and SLAM, every dive (default 0)")
+    p.add_argument("--mode", help="SLAM mode: dr, position, pose, pose+heading or all (default; or --config's)")
+    p.add_argument("--seed", type=int, help="seed of recognition and SLAM, every dive (default 0, or --config's)")
     p.add_argument("--vehicle", help="vehicle description (TOML) of every dive")
     p.add_argument("--topics", help="topic map of the bags (TOML)")
     p.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="message definitions (bags)")
-    p.add_argument("--backend", choices=BACKENDS, default="ekf", help="SLAM estimator (as `semslam run`; default ekf)")
+    p.add_argument("--backend", choices=BACKENDS, help="SLAM estimator (as `semslam run`; default ekf)")
+    add_config_options(p)
     p.add_argument("--no-report", action="store_true", help="skip each dive's report.html")
     p.set_defaults(func=run)
 
 
 def process_dive(dive: Path, out: Path, options: dict) -> None:
-    """One dive, as ``semslam run DIVE --out OUT`` does it (a Dask task: runs on a worker)."""
-    from . import cmd_run
+    """One dive, as ``semslam run DIVE --out OUT`` does it (a Dask task: runs on a worker): the same library call,
+    :func:`semslam.run.dive.run_dive`."""
+    from ..run.config import RunConfig, write_resolved_config
+    from ..run.dive import run_dive
+    from ._inputs import load_database_arg
 
-    parser = argparse.ArgumentParser(add_help=False)  # `semslam run`'s own defaults, for options batch does not set
-    cmd_run.register(parser.add_subparsers(), argparse.ArgumentParser(add_help=False))
-    args = parser.parse_args(["run", str(dive), "--db", options["db"], "--out", str(out)])
-    for key in ("vehicle", "topics", "msg_dir", "seed", "no_report", "backend"):
-        if key in options:
-            setattr(args, key, options[key])
-    args.json = True  # no progress bars on workers
-    cmd_run._run(args, out, tuple(options["modes"]))
+    rc = RunConfig.from_dict(options.get("config", {}), source="the batch's configuration")  # --config/--preset
+    run_dive(dive, out, db=load_database_arg(options["db"]), modes=tuple(options["modes"]),
+             topics=options.get("topics"), vehicle=options.get("vehicle"), msg_dirs=options.get("msg_dir", ()),
+             backend=options.get("backend", "ekf"), seed=options.get("seed", 0), config=rc.slam_config(),
+             pipeline_config=rc.pipeline_config(), up_from_attitude=rc.run.up_from_attitude)
+    write_resolved_config(rc, out)  # RUN/config.toml
+    if not options.get("no_report"):
+        from ..report.build import build_report
+
+        build_report(out)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..experiments._dask import scheduler_tls
+
+    with scheduler_tls(args.scheduler, getattr(args, "tls_ca_file", None), getattr(args, "tls_cert", None),
+                       getattr(args, "tls_key", None)):
+        return _run_batch(args)
+
+
+def _run_batch(args: argparse.Namespace) -> int:
     import sys
 
     from ..errors import InputError
     from ..experiments._dask import check_jobs
     from ..experiments.batch import INDEX, SUMMARY_MD, run_batch, table_rows, markdown
-    from ..slam import MODES
+    from ._inputs import run_config_from_args
     from ._output import emit
 
-    modes = MODES if args.mode == "all" else (args.mode,)
-    if any(m not in MODES for m in modes):
-        raise InputError(f"The '--mode' option must be one of {MODES} or 'all'. Got {args.mode!r} instead.")
+    rc = run_config_from_args(args)  # --preset, --config, then the explicit options (semslam.run.config)
+    modes = rc.run.modes
     for d in args.dives:
         if not Path(d).exists():
             raise InputError(f"The dive {d!r} does not exist: give ROS bags or mission directories.")
@@ -75,10 +93,10 @@ def run(args: argparse.Namespace) -> int:
 
         jobs = machine_workers()
     options = {"db": str(Path(args.db).resolve()) if args.db != "builtin" else "builtin", "modes": list(modes),
-               "seed": args.seed, "vehicle": args.vehicle and str(Path(args.vehicle).resolve()),
+               "seed": rc.run.seed, "vehicle": args.vehicle and str(Path(args.vehicle).resolve()),
                "topics": args.topics and str(Path(args.topics).resolve()),
                "msg_dir": [str(Path(d).resolve()) for d in args.msg_dir], "no_report": args.no_report,
-               "backend": args.backend}
+               "backend": rc.run.backend, "config": rc.resolved_dict()}
     quiet = getattr(args, "json", False)
     total = len(args.dives)
     count = [0]

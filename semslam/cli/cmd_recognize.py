@@ -32,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--seed", type=int, default=0, help="seed of RMSAC, ESF and the coarse alignment (default 0)")
     parser.add_argument("--no-pose", action="store_true", help="recognition only, no pose estimation")
     parser.add_argument("--out", metavar="FILE.jsonl", help="write one detection per line (JSON)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the --out file if it exists")
     seg = parser.add_argument_group(
         "segmentation", "the defaults suit a laser at 1-3 m; for a depth camera frame (e.g. RealSense at 30 cm) "
                         "use --max-range 0.5 --voxel auto --cluster-tolerance auto --max-planes 0")
@@ -142,18 +143,17 @@ def _segmentation_table(args: argparse.Namespace, table: object) -> object:
 def run(args: argparse.Namespace) -> int:
     import json
     import time
-    from pathlib import Path
-
-    from ..errors import InputError
 
     from .._atomic import atomic_write_text
+    from .._outdir import check_output_file, staged_output_file
     from ..io import read_point_cloud
     from ..pipeline import PipelineConfig, ScanRecognizer
     from ..recognition import load_database
     from ._output import emit, to_jsonable
 
-    if args.out and Path(args.out).is_dir():  # say so before the work, not after it
-        raise InputError(f"The '--out' option must name a file to write. Got the directory {args.out!r} instead.")
+    inputs = (args.scene, args.db, args.config)
+    if args.out:  # say so before the work, not after it (semslam._outdir)
+        check_output_file(args.out, overwrite=args.overwrite, inputs=inputs)
     raw = {}
     if args.config:
         from ._inputs import read_config_file
@@ -202,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
                "segmentation": result.segmentation.to_dict(), "notes": notes}
     if args.out:
         text = "".join(json.dumps(to_jsonable(d)) + "\n" for d in payload["detections"])
-        atomic_write_text(args.out, text)
+        with staged_output_file(args.out, overwrite=args.overwrite, inputs=inputs) as tmp:
+            atomic_write_text(tmp, text)
         payload["out"] = str(args.out)
     emit(args, payload, lambda: format_result(payload))
     return 0

@@ -65,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     p.add_argument("--clean", action="store_true",
                    help="drop points at the sensor origin (invalid depth) and drawn straight lines first")
     p.add_argument("--out", default=None, metavar="FILE", help="write the aligned source cloud here")
+    p.add_argument("--overwrite", action="store_true", help="replace the --out file if it exists")
     p.set_defaults(func=run)
 
 
@@ -97,13 +98,16 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from .._outdir import check_output_file
     from ..errors import RegistrationError
-    from ..io import read_point_cloud, write_point_cloud
+    from ..io import read_point_cloud
     from ..registration import RegisterConfig
     from ..registration import register as register_clouds
     from ._output import emit
 
     t0 = time.perf_counter()
+    if args.out:  # before the work (semslam._outdir)
+        check_output_file(args.out, overwrite=args.overwrite, inputs=(args.source, args.target))
     budget = None if args.time_budget == 0 else args.time_budget
     cfg = RegisterConfig(voxel_m=args.voxel, max_iterations=args.max_iterations,
                          k_correspondences=args.k_correspondences, similarity=args.similarity,
@@ -134,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{cfg.time_budget_s:.3g} s were left for register)") if "time budget" in str(exc) else ""
         raise RegistrationError(f"Cannot register SOURCE {args.source} onto TARGET {args.target}: {exc}{note}") from None
     if args.out and res.converged:
-        write_point_cloud(args.out, source.transformed(res.T_target_source, frame_id=target.frame_id))
+        _write_aligned(args, source.transformed(res.T_target_source, frame_id=target.frame_id))
     payload = {"source": args.source, "target": args.target, "config": cfg.to_dict(), "seed": args.seed,
                **res.to_dict()}
 
@@ -160,11 +164,18 @@ def run(args: argparse.Namespace) -> int:
     return 0 if res.converged else 1
 
 
+def _write_aligned(args: argparse.Namespace, cloud) -> None:
+    from .._outdir import staged_output_file
+    from ..io import write_point_cloud
+
+    with staged_output_file(args.out, overwrite=args.overwrite, inputs=(args.source, args.target)) as tmp:
+        write_point_cloud(tmp, cloud)
+
+
 def _run_upright(args: argparse.Namespace, source, target) -> int:
     import numpy as np
 
     from ..errors import RegistrationError
-    from ..io import write_point_cloud
     from ..registration import align_upright
     from ._output import emit
 
@@ -173,7 +184,7 @@ def _run_upright(args: argparse.Namespace, source, target) -> int:
     except RegistrationError as exc:
         raise RegistrationError(f"Cannot register SOURCE {args.source} onto TARGET {args.target}: {exc}") from None
     if args.out:
-        write_point_cloud(args.out, source.transformed(res.T_target_source, frame_id=target.frame_id))
+        _write_aligned(args, source.transformed(res.T_target_source, frame_id=target.frame_id))
     payload = {"source": args.source, "target": args.target, "up_source": list(args.up),
                "up_target": list(args.up_target or args.up), **res.to_dict()}
 

@@ -161,6 +161,10 @@ def run(args: argparse.Namespace) -> int:
         max_cluster_size=args.max_cluster_size or None,
         **range_fields(args, "segment"),
     )
+    if args.out:  # before the work (semslam._outdir)
+        from .._outdir import check_output_dir
+
+        check_output_dir(args.out, overwrite=args.overwrite, kind="segmentation", inputs=(args.scene,))
     cloud = read_point_cloud(args.scene)
     result = segment_scene(cloud, config, seed=args.seed)
     payload = {
@@ -174,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
 
         final = Path(args.out)
         payload["files"] = [str(final / f"cluster_{i:03d}.pcd") for i in range(len(result.clusters))]
-        with staged_output_dir(final, overwrite=args.overwrite, kind="segmentation") as out:
+        with staged_output_dir(final, overwrite=args.overwrite, kind="segmentation",
+                               inputs=(args.scene,)) as out:
             for i, cluster in enumerate(result.clusters):
                 write_point_cloud(out / f"cluster_{i:03d}.pcd", cluster)
             atomic_write_text(out / "segmentation.json", json.dumps(to_jsonable(payload), indent=2) + "\n")

@@ -23,9 +23,14 @@ def register(subparsers, common) -> None:
     p.add_argument("--scan-interval", type=float, default=None, metavar="S",
                    help="time between scan starts (default 0.5 s, at least 1/HZ)")
     p.add_argument("--clutter", action="store_true", help="add rocks and pipe offcuts that are not in the database")
+    p.add_argument("--gps", type=int, default=0, metavar="N",
+                   help="record N surface GPS fixes before the dive (metres of error, stated covariance; default 0: "
+                        "the indoor tank has no GPS)")
+    p.add_argument("--usbl-rate", type=float, default=0.0, metavar="HZ", help="record USBL fixes during the dive")
     p.add_argument("--no-scans", action="store_true", help="navigation and ground truth only (fast)")
     p.add_argument("--quick", action="store_true", help="small and fast: 1 loop, ~10k-point scans")
-    p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace DIR (and the bag's companion files) if semslam wrote it")
     p.set_defaults(func=run)
 
 
@@ -33,11 +38,22 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
     from pathlib import Path
 
+    from .._outdir import check_output_dir, check_output_file, staged_output_file
     from ..errors import MissionError
     from ..simulation import SimulatorConfig, simulate_mission, write_mission
     from ..simulation.simulate import DEFAULT_SCAN_INTERVAL_S
     from ._output import emit
 
+    # before the work: what semslam may replace (semslam._outdir); the bag's companions are files like the bag
+    companions = (f"{args.out}.vehicle.toml", f"{args.out}.topics.toml") if args.format != "mission" else ()
+    if args.format == "ros1":
+        check_output_file(args.out, overwrite=args.overwrite)
+        if not args.out.endswith(".bag"):
+            raise MissionError(f"A ROS 1 bag's name must end in .bag. Got {args.out!r} instead.")
+    else:
+        check_output_dir(args.out, overwrite=args.overwrite, kind="bag" if companions else "mission")
+    for c in companions:
+        check_output_file(c, overwrite=args.overwrite)
     if Path(args.out).exists() and not args.overwrite:
         raise MissionError(f"The output directory {args.out!r} already exists. Use --overwrite to replace it.")
     cfg = SimulatorConfig.quick() if args.quick else SimulatorConfig()
@@ -47,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.replace(scanner=dataclasses.replace(cfg.scanner, scan_rate_hz=args.scan_rate))
     if args.clutter:
         cfg = cfg.replace(world=dataclasses.replace(cfg.world, clutter=True))
+    if args.gps or args.usbl_rate:
+        cfg = cfg.replace(fixes=dataclasses.replace(cfg.fixes, gps_count=args.gps, usbl_rate_hz=args.usbl_rate))
     interval = args.scan_interval
     if interval is None:
         interval = max(DEFAULT_SCAN_INTERVAL_S, 1.0 / cfg.scanner.scan_rate_hz) if cfg.scanner.scan_rate_hz > 0 else DEFAULT_SCAN_INTERVAL_S
@@ -57,13 +75,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         from .._atomic import atomic_write_text
         from ..dataset import write_vehicle_toml
-        from ..dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
+        from ..dataset.rosbag_write import topic_map_of, write_bag
 
-        if args.format == "ros1" and not args.out.endswith(".bag"):
-            raise MissionError(f"A ROS 1 bag's name must end in .bag. Got {args.out!r} instead.")
         out = write_bag(mission, args.out, args.format, overwrite=args.overwrite)
-        write_vehicle_toml(mission.vehicle, f"{out}.vehicle.toml")
-        atomic_write_text(f"{out}.topics.toml", SEMSLAM_TOPICS.to_toml())
+        with staged_output_file(companions[0], overwrite=args.overwrite) as tmp:
+            write_vehicle_toml(mission.vehicle, tmp)
+        with staged_output_file(companions[1], overwrite=args.overwrite) as tmp:
+            atomic_write_text(tmp, topic_map_of(mission).to_toml())
     n_points = sum(s.n_points for s in mission.scans)
     payload = {
         "directory": str(out), "format": args.format, "seed": args.seed, "duration_s": mission.duration_s, "n_scans": len(mission.scans),

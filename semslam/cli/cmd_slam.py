@@ -13,25 +13,30 @@ BACKEND_CHOICES = ("ekf", "isam2", "batch")
 
 
 def register(subparsers, common) -> None:
+    from ._inputs import add_config_options
+    from ._scheduler_tls import add_tls_options
+
     p = subparsers.add_parser("slam", parents=[common], help="run the semantic EKF-SLAM on a mission",
                               description="Run the semantic EKF-SLAM on a mission directory (or 'synthetic:SEED') "
                                           "and write trajectory.csv, landmarks.csv, updates.csv, metrics.json.")
     p.add_argument("mission", help="mission directory, or synthetic:SEED for the built-in analytic square mission")
-    p.add_argument("--mode", choices=MODE_CHOICES, default="pose", help="filter mode (all: one sub-directory per mode)")
+    p.add_argument("--mode", choices=MODE_CHOICES, help="filter mode (default pose, or --config's [run] modes; all: "
+                                                        "one sub-directory per mode)")
     p.add_argument("--out", required=True, help="run directory to write (new, or an earlier run with --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier semslam run in --out")
     p.add_argument("--detections", help="JSON lines of Detection.to_dict(), e.g. from `semslam detect` (default, or "
                                         "'truth': truth-based detections simulated from the dataset's ground truth)")
-    p.add_argument("--config", help="TOML or JSON file of SlamConfig fields (a [slam] table, or the fields at the top); "
-                                    "a run's config.json repeats it exactly")
+    add_config_options(p, "the filter")  # a run's config.json (SlamConfig's sections at the top) is read too
     p.add_argument("--vehicle", help="vehicle description (TOML) replacing the dataset's; 'girona500' for the defaults")
     p.add_argument("--db", help="view database whose class symmetries the map uses (default: the built-in objects')")
     p.add_argument("--export", action="store_true",
                    help="also write TUM and KITTI trajectories, the map as JSON/CSV/PLY and run.mcap (ROS 2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the truth-based detections (default 0)")
+    p.add_argument("--seed", type=int, help="seed of the truth-based detections (default 0, or --config's)")
+    p.add_argument("--survey", metavar="FILE", help="landmarks known a priori: a survey CSV or an earlier run's map.json")
     p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
-                   help="name of a mission object whose pose is known a priori (surveyed reference structure); repeatable")
-    p.add_argument("--backend", choices=BACKEND_CHOICES, default="ekf",
+                   help="with truth-based detections: a mission object given to the run as a simulated survey (its "
+                        "true pose plus the survey's error); repeatable")
+    p.add_argument("--backend", choices=BACKEND_CHOICES,
                    help="estimator: the EKF (default), or a GTSAM factor graph: isam2 (online smoothing) or batch")
     p.set_defaults(func=run)
 
@@ -54,13 +59,15 @@ def register(subparsers, common) -> None:
     q.add_argument("--white-dvl", action="store_true",
                    help="missions with a white-noise-only DVL (no scale factor, misalignment or biases)")
     q.add_argument("--launch-sigma", type=float, default=None, metavar="M",
-                   help="standard deviation (m, per axis) of the launch point, which defines the world frame "
-                        "(default: SlamConfig's, 0.001)")
+                   help="standard deviation (m, per axis) of the start point of a dive without position fixes, "
+                        "which defines its local frame (default: SlamConfig's, 0.001)")
     q.add_argument("--no-smooth", action="store_true", help="skip the RTS-smoothed trajectories")
     q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves")
     q.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="worker processes of a local Dask cluster (default 1: serial, in this process); same results")
-    q.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (tcp://host:8786)")
+    q.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler: tls://host:8786 "
+                   "with --tls-* certificates, or tcp://host:8786 (unauthenticated: trusted networks only)")
+    add_tls_options(q)
     q.add_argument("--backend", choices=BACKEND_CHOICES, default="ekf",
                    help="estimator: the EKF (default), or a GTSAM factor graph: isam2 or batch")
     q.set_defaults(func=run_montecarlo_cmd)
@@ -69,22 +76,29 @@ def register(subparsers, common) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._outdir import staged_output_dir
     from ..errors import InputError
-    from ..slam import MODES, SlamConfig, read_detections_jsonl, run_slam, write_run
+    from ..run.config import write_resolved_config
+    from ..slam import read_detections_jsonl, run_slam, write_run
     from ..slam.rundir import mode_dir
-    from ._inputs import load_dataset, read_config_file
+    from ._inputs import load_dataset, run_config_from_args
     from ._output import emit
 
     mission = load_dataset(args.mission, args.vehicle)
-    raw = read_config_file(args.config) if args.config else {}
-    cfg = SlamConfig.from_dict(raw.get("slam", raw), source=f"the --config file {args.config!r}")
-    if args.surveyed:
-        cfg = cfg.updated(surveyed_objects=tuple(args.surveyed))
+    rc = run_config_from_args(args, default_modes=("pose",))  # --preset, --config, the explicit options
+    cfg = rc.slam_config()
+    survey = None
+    if args.survey:
+        from ..slam.survey import read_survey
+
+        survey = read_survey(args.survey)
     dets = None
     if args.detections and args.detections != "truth":
         dets = read_detections_jsonl(args.detections)
     elif mission.truth is None or not mission.objects:
         raise InputError("The dataset has no ground truth to simulate detections from: give --detections FILE "
                          "(from `semslam detect`).")
+    if args.surveyed and dets is not None:
+        raise InputError("The '--surveyed' option simulates a survey from the ground truth, with truth-based "
+                         "detections only: give a survey file with --survey instead.")
     if args.db:
         from ..recognition import load_database
 
@@ -93,18 +107,23 @@ def run(args: argparse.Namespace) -> int:
         from ..simulation.truth_slam import builtin_symmetries
 
         symmetries = builtin_symmetries()
-    modes = MODES if args.mode == "all" else (args.mode,)
+    modes = rc.run.modes
     final = Path(args.out)
     payload = {}
-    with staged_output_dir(final, overwrite=args.overwrite) as out:
+    with staged_output_dir(final, overwrite=args.overwrite,
+                           inputs=(args.mission, args.detections, args.config, args.vehicle, args.db,
+                                   args.survey)) as out:
         for mode in modes:
             if dets is None:
                 from ..experiments.montecarlo import truth_run
 
-                res = truth_run(mission, mode, cfg, args.seed, args.backend)
+                from ..simulation.truth_slam import run_truth_slam
+
+                res = run_truth_slam(mission, mode=mode, config=cfg, seed=rc.run.seed, backend=rc.run.backend,
+                                     surveyed=tuple(args.surveyed))
             else:
-                res = run_slam(mission, dets, mode=mode, config=cfg, seed=args.seed, symmetries=symmetries,
-                               backend=args.backend)
+                res = run_slam(mission, dets, mode=mode, config=cfg, symmetries=symmetries, backend=rc.run.backend,
+                               survey=survey)
             where = mode_dir(out, mode) if len(modes) > 1 else out
             write_run(res, where)
             if args.export:
@@ -113,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
                 export_run(res, where, detections_by_scan=dets or None,
                            T_vehicle_scanner=mission.T_vehicle_scanner if dets else None)
             payload[mode] = res.metrics
+        write_resolved_config(rc, out)  # RUN/config.toml: every setting, the preset named
     out = final
 
     def text() -> str:
@@ -129,6 +149,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_montecarlo_cmd(args: argparse.Namespace) -> int:
+    from ..experiments._dask import scheduler_tls
+
+    with scheduler_tls(args.scheduler, getattr(args, "tls_ca_file", None), getattr(args, "tls_cert", None),
+                       getattr(args, "tls_key", None)):
+        return _run_montecarlo(args)
+
+
+def _run_montecarlo(args: argparse.Namespace) -> int:
     import sys
 
     from ..errors import InputError
@@ -138,8 +166,6 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
 
     modes = MODES if args.mode == "all" else (args.mode,)
     overrides: dict = {}
-    if args.surveyed:
-        overrides["surveyed_objects"] = tuple(args.surveyed)
     if args.launch_sigma is not None:
         if not (args.launch_sigma > 0 and args.launch_sigma < float("inf")):
             raise InputError(f"The '--launch-sigma' option must be a positive number of metres. Got {args.launch_sigma!r} instead.")
@@ -150,7 +176,7 @@ def run_montecarlo_cmd(args: argparse.Namespace) -> int:
                          loops=args.loops, log=None if getattr(args, "json", False) else
                          (lambda s: print(s, file=sys.stderr)), yaw_bias_walk_deg_per_sqrt_s=args.yaw_bias_walk,
                          white_dvl=args.white_dvl, jobs=args.jobs, scheduler=args.scheduler,
-                         config_overrides=overrides or None, backend=args.backend)
+                         config_overrides=overrides or None, backend=args.backend, surveyed=tuple(args.surveyed))
     if args.out:
         write_montecarlo(res, args.out)
     emit(args, {"n_runs": res.n_runs, "summary": res.summary}, res.table)

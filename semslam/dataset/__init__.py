@@ -7,7 +7,8 @@ optional ground truth (:class:`VehicleTruth`, :class:`ObjectTruth`). A mission d
 """
 
 from .dataset import TIME_FIELDS, Dataset, Mission
-from .logs import AhrsLog, AttitudeLog, DepthLog, DvlLog, ObjectTruth, ScanRecord, VehicleTruth, check_stamps
+from .logs import (AhrsLog, AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, ScanRecord, VehicleTruth,
+                   check_stamps)
 from .mission_dir import FORMAT_VERSION, read_mission, vehicle_from_simulator_dict, write_mission
 from .vehicle import (
     AttitudeSpec,
@@ -20,7 +21,7 @@ from .vehicle import (
 )
 
 __all__ = [
-    "TIME_FIELDS", "Dataset", "Mission", "AhrsLog", "AttitudeLog", "DepthLog", "DvlLog", "ObjectTruth", "ScanRecord",
+    "TIME_FIELDS", "Dataset", "Mission", "AhrsLog", "AttitudeLog", "DepthLog", "DvlLog", "PositionFixLog", "ObjectTruth", "ScanRecord",
     "VehicleTruth", "check_stamps", "FORMAT_VERSION", "read_mission", "vehicle_from_simulator_dict", "write_mission",
     "AttitudeSpec", "DepthSpec", "DvlSpec", "ScannerSpec", "VehicleDescription", "read_vehicle_toml",
     "write_vehicle_toml",

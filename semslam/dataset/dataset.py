@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError, PcdError
+from ..geodesy import GeodeticOrigin
 from ..geometry import RigidTransform
-from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, ScanRecord, VehicleTruth
+from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, ScanRecord, VehicleTruth
 from .vehicle import VehicleDescription
 
 #: per-point time fields a scan may carry (seconds from the scan's start stamp)
@@ -29,7 +30,11 @@ TIME_FIELDS = ("t", "time", "timestamp", "time_offset_s")
 class Dataset:
     """A whole dive. ``directory`` is where it was read from (None in memory); ``metadata`` is free-form
     provenance (a simulator's settings, a bag's name) that no algorithm reads; ``scan_clouds`` holds in-memory
-    scans (scan_id -> PointCloud) when there is no directory to read them from."""
+    scans (scan_id -> PointCloud) when there is no directory to read them from.
+
+    ``fixes`` are the vehicle's own position fixes (GPS, USBL) in the world frame, which is local NED about
+    ``geodetic_origin`` when one is stated. ``truth`` and ``objects`` are ground truth: only evaluation reads them,
+    after a run (the estimate of a dive is the same with or without them)."""
 
     vehicle: VehicleDescription
     dvl: DvlLog
@@ -42,6 +47,8 @@ class Dataset:
     directory: Path | None = None
     seed: int | None = None
     scan_clouds: dict | None = None
+    fixes: PositionFixLog | None = None
+    geodetic_origin: GeodeticOrigin | None = None
 
     def __post_init__(self) -> None:
         for name, cls in (("vehicle", VehicleDescription), ("dvl", DvlLog), ("attitude", AttitudeLog),
@@ -49,6 +56,12 @@ class Dataset:
             if not isinstance(getattr(self, name), cls):
                 raise DatasetError(f"The {name!r} argument of Dataset must be a {cls.__name__}. Got "
                                    f"{type(getattr(self, name)).__name__} instead.")
+        if self.fixes is not None and not isinstance(self.fixes, PositionFixLog):
+            raise DatasetError(f"The 'fixes' argument of Dataset must be a PositionFixLog or None. Got "
+                               f"{type(self.fixes).__name__} instead.")
+        if self.geodetic_origin is not None and not isinstance(self.geodetic_origin, GeodeticOrigin):
+            raise DatasetError(f"The 'geodetic_origin' argument of Dataset must be a GeodeticOrigin or None. Got "
+                               f"{type(self.geodetic_origin).__name__} instead.")
         if self.truth is not None and not isinstance(self.truth, VehicleTruth):
             raise DatasetError(f"The 'truth' argument of Dataset must be a VehicleTruth or None. Got "
                                f"{type(self.truth).__name__} instead.")

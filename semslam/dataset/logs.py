@@ -120,6 +120,45 @@ class DepthLog:
 
 
 @dataclass(frozen=True, eq=False)
+class PositionFixLog:
+    """Horizontal position fixes of the vehicle in the world NED frame: GPS at the surface, USBL during the dive.
+    ``position_ne_m`` (N, 2) north, east (m) about the dataset's geodetic origin; ``covariance_ne_m2`` (N, 2, 2)
+    their stated covariance (what the receiver reports, or the user's figure); ``source`` (N,) a label per fix
+    (``"gps"``, ``"usbl"``). The vertical comes from the pressure sensor, never from a fix."""
+
+    stamp_s: np.ndarray
+    position_ne_m: np.ndarray
+    covariance_ne_m2: np.ndarray
+    source: tuple = ()
+
+    def __post_init__(self) -> None:
+        t = check_stamps("stamp_s", self.stamp_s, "PositionFixLog")
+        n = len(t)
+        object.__setattr__(self, "stamp_s", t)
+        p = _rows("position_ne_m", self.position_ne_m, n, 2, "PositionFixLog", finite=False)
+        object.__setattr__(self, "position_ne_m", p)
+        c = as_float_array("covariance_ne_m2", self.covariance_ne_m2, (n, 2, 2), caller="PositionFixLog",
+                           error=DatasetError, finite=False)
+        object.__setattr__(self, "covariance_ne_m2", c)
+        src = tuple(str(x) for x in self.source) if len(self.source) else ("gps",) * n
+        if len(src) != n:
+            raise DatasetError(f"The 'source' argument of PositionFixLog must have {n} labels. Got {len(src)} instead.")
+        object.__setattr__(self, "source", src)
+
+    def __len__(self) -> int:
+        return len(self.stamp_s)
+
+    def usable(self) -> np.ndarray:
+        """(N,) bool: a finite position and a finite, symmetric positive-definite covariance. A fix that is not
+        usable is skipped by the filter and counted (a receiver without a solution reports NaN)."""
+        ok = np.isfinite(self.position_ne_m).all(axis=1) & np.isfinite(self.covariance_ne_m2).all(axis=(1, 2))
+        c = np.where(ok[:, None, None], self.covariance_ne_m2, np.eye(2))
+        sym = np.abs(c[:, 0, 1] - c[:, 1, 0]) <= 1e-9 * (np.abs(c[:, 0, 0]) + np.abs(c[:, 1, 1]) + 1e-300)
+        pd = (c[:, 0, 0] > 0) & (c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0] > 0)
+        return ok & sym & pd
+
+
+@dataclass(frozen=True, eq=False)
 class VehicleTruth:
     """Ground-truth vehicle state: position in world NED, attitude, body-frame velocity (at least 2 rows,
     since metrics interpolate it)."""

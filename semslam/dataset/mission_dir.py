@@ -8,10 +8,14 @@ written by semslam <= 0.1, still reads). Documented in docs/mission-format.md.
     dvl.csv                      stamp_s,vx_mps,vy_mps,vz_mps,valid[,range_0_m,...]  (DVL frame; NaN when not valid)
     ahrs.csv                     stamp_s,roll_rad,pitch_rad,yaw_rad
     depth.csv                    stamp_s,depth_m
+    position_fixes.csv           stamp_s,north_m,east_m,var_nn_m2,cov_ne_m2,var_ee_m2,source   (optional: GPS, USBL)
     scans/index.csv              scan_id,start_stamp_s,end_stamp_s,file,n_points
     scans/scan_NNNNN.pcd         binary_compressed PCD (x y z intensity line instance), scanner frame
     ground_truth/vehicle.csv     stamp_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,u_mps,v_mps,w_mps
     ground_truth/objects.csv     name,label,in_database,x_m,y_m,z_m,qw,qx,qy,qz    (T_world_object)
+
+``ground_truth/`` is optional (a recorded dive has none); only evaluation reads it. ``mission.json`` may state
+the world frame's ``geodetic_origin`` (latitude_deg, longitude_deg, height_m): the fixes are NED about it.
 
 The directory is written into a temporary sibling and renamed at the end, so a reader never sees a
 half-written mission; files inside are written with :mod:`semslam._atomic`. Numbers are written with
@@ -29,11 +33,11 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write_text
-from .._outdir import MARKER, staged_output_dir
+from .._outdir import staged_output_dir
 from ..errors import DatasetError, SemslamError
 from ..geometry import RigidTransform
 from .dataset import Dataset
-from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, ScanRecord, VehicleTruth
+from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, ScanRecord, VehicleTruth
 from .vehicle import VehicleDescription, read_vehicle_toml, write_vehicle_toml
 
 FORMAT_VERSION = 2
@@ -42,6 +46,7 @@ SUPPORTED_VERSIONS = (1, 2)
 _DVL = ("stamp_s", "vx_mps", "vy_mps", "vz_mps", "valid")
 _AHRS = ("stamp_s", "roll_rad", "pitch_rad", "yaw_rad")
 _DEPTH = ("stamp_s", "depth_m")
+_FIXES = ("stamp_s", "north_m", "east_m", "var_nn_m2", "cov_ne_m2", "var_ee_m2", "source")
 _INDEX = ("scan_id", "start_stamp_s", "end_stamp_s", "file", "n_points")
 _VEHICLE = ("stamp_s", "x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "u_mps", "v_mps", "w_mps")
 _OBJECTS = ("name", "label", "in_database", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
@@ -79,13 +84,11 @@ def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
     if not isinstance(mission, Dataset):
         raise DatasetError(f"The 'mission' argument of write_mission must be a Dataset. Got {type(mission).__name__} instead.")
     out = Path(out_dir)
+    # only a mission semslam's marker proves it wrote is replaced (semslam._outdir), never the mission's own source
     if out.exists() and not overwrite:
         raise DatasetError(f"The 'out_dir' argument of write_mission must not exist (use overwrite). Got existing {str(out)!r} instead.")
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / MARKER).is_file()
-                                              and not (out / "mission.json").is_file())):
-        raise DatasetError(f"The 'out_dir' argument of write_mission must be a new directory or a mission directory "
-                           f"(semslam never replaces what it did not write). Got {str(out)!r} instead.")
-    with staged_output_dir(out, overwrite=True, kind="mission", option="out_dir", markers=(MARKER, "mission.json")) as tmp:
+    with staged_output_dir(out, overwrite=True, kind="mission", option="out_dir",
+                           inputs=(mission.directory,)) as tmp:
         _write_into(mission, tmp)
     return out
 
@@ -93,11 +96,15 @@ def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
 def _write_into(m: Dataset, d: Path) -> None:
     from ..io import write_point_cloud
 
-    meta = {k: v for k, v in m.metadata.items() if k not in ("format_version", "seed", "files", "T_vehicle_scanner")}
+    meta = {k: v for k, v in m.metadata.items() if k not in ("format_version", "seed", "files", "T_vehicle_scanner",
+                                                             "geodetic_origin")}
     meta["format_version"] = FORMAT_VERSION
     meta["seed"] = m.seed
+    if m.geodetic_origin is not None:
+        meta["geodetic_origin"] = m.geodetic_origin.as_dict()
     meta["files"] = {"vehicle": "vehicle.toml", "dvl": "dvl.csv", "ahrs": "ahrs.csv", "depth": "depth.csv",
                      "scans": "scans/index.csv",
+                     "position_fixes": "position_fixes.csv" if m.fixes is not None else None,
                      "vehicle_truth": "ground_truth/vehicle.csv" if m.truth is not None else None,
                      "objects_truth": "ground_truth/objects.csv"}
     atomic_write_text(d / "mission.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
@@ -112,6 +119,11 @@ def _write_into(m: Dataset, d: Path) -> None:
     a = m.attitude.rpy_rad
     atomic_write_text(d / "ahrs.csv", _table(_AHRS, m.attitude.stamp_s, a[:, 0], a[:, 1], a[:, 2]))
     atomic_write_text(d / "depth.csv", _table(_DEPTH, m.depth.stamp_s, m.depth.depth_m))
+    if m.fixes is not None:
+        f, c = m.fixes, m.fixes.covariance_ne_m2
+        rows = ([_num(t), _num(p[0]), _num(p[1]), _num(ci[0, 0]), _num(ci[0, 1]), _num(ci[1, 1]), src]
+                for t, p, ci, src in zip(f.stamp_s, f.position_ne_m, c, f.source))
+        atomic_write_text(d / "position_fixes.csv", _csv_text(_FIXES, rows))
     (d / "scans").mkdir()
     rows = []
     for rec in m.scans:
@@ -206,15 +218,24 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
         files = meta.get("files") or {}
         if not isinstance(files, dict):
             raise DatasetError(f"The mission file {str(meta_path)!r} key 'files' must be an object. Got {files!r} instead.")
-        if files.get("vehicle_truth"):
+        # ground truth is optional (a recorded dive has none; only evaluation reads it): read when present
+        if files.get("vehicle_truth") and (d / "ground_truth" / "vehicle.csv").exists():
             ve = _floats(d / "ground_truth" / "vehicle.csv", _VEHICLE)
             truth = _log(d / "ground_truth" / "vehicle.csv", VehicleTruth, ve[:, 0], ve[:, 1:4], ve[:, 4:7], ve[:, 7:10])
         objects = _read_objects(d / "ground_truth" / "objects.csv") if (d / "ground_truth" / "objects.csv").exists() else []
+        fixes = _read_fixes(d / "position_fixes.csv") if (d / "position_fixes.csv").exists() else None
+        origin = None
+        if meta.get("geodetic_origin") is not None:
+            from ..geodesy import GeodeticOrigin
+
+            origin = GeodeticOrigin.from_dict(meta["geodetic_origin"], source=f"{str(meta_path)!r} geodetic_origin")
         scans = _read_index(d / "scans" / "index.csv") if (d / "scans" / "index.csv").exists() else []
-        metadata = {k: v for k, v in meta.items() if k not in ("T_vehicle_scanner", "files", "format_version", "seed")}
+        metadata = {k: v for k, v in meta.items() if k not in ("T_vehicle_scanner", "files", "format_version", "seed",
+                                                             "geodetic_origin")}
         seed = meta.get("seed")
         return Dataset(vehicle, dvl, attitude, depth, truth, objects, scans, metadata, d,
-                       seed if isinstance(seed, int) and not isinstance(seed, bool) else None)
+                       seed if isinstance(seed, int) and not isinstance(seed, bool) else None, fixes=fixes,
+                       geodetic_origin=origin)
     except DatasetError as exc:
         raise DatasetError(f"{exc}" if str(d) in str(exc) else f"The mission in {str(d)!r}: {exc}") from None
     except SemslamError as exc:  # e.g. a non-rotation quaternion
@@ -270,7 +291,9 @@ def vehicle_from_simulator_dict(sim: dict, T_vehicle_scanner: RigidTransform, *,
                      ("bias_tau_s", "bias_tau_s"), ("slope_bias_sigma_mps", "degraded_bias_sigma_mps"),
                      ("slope_bias_tau_s", "degraded_bias_tau_s"), ("beam_angle_rad", "beam_angle_rad")):
         if src in dvl:
-            d["dvl"][dst] = max(dvl[src], 1.0) if dst == "degraded_noise_factor" else dvl[src]
+            # a noiseless simulated DVL is described with the smallest plausible noise (semslam.limits), as depth
+            d["dvl"][dst] = max(dvl[src], 1.0) if dst == "degraded_noise_factor" else \
+                max(dvl[src], 1e-4) if dst == "noise_abs_mps" else dvl[src]
     if "noise_rpy_rad" in ahrs:
         d["attitude"]["noise_rpy_rad"] = list(ahrs["noise_rpy_rad"])
     if "yaw_bias_walk_rad_per_sqrt_s" in ahrs:
@@ -284,6 +307,16 @@ def vehicle_from_simulator_dict(sim: dict, T_vehicle_scanner: RigidTransform, *,
     if "sweep_fov_rad" in sc:
         d["scanner"]["fov_rad"] = min(sc["sweep_fov_rad"], sc.get("line_fov_rad", sc["sweep_fov_rad"]))
     return VehicleDescription.from_dict(d, source=source)
+
+
+def _read_fixes(path: Path) -> PositionFixLog:
+    head, rows = _read_rows(path, _FIXES)
+    try:
+        v = np.array([r[:6] for r in rows], dtype=float).reshape(len(rows), 6)
+    except ValueError:
+        raise DatasetError(f"The mission file {str(path)!r} must hold numbers in its first six columns.") from None
+    cov = np.stack([v[:, 3], v[:, 4], v[:, 4], v[:, 5]], axis=-1).reshape(-1, 2, 2)
+    return _log(path, PositionFixLog, v[:, 0], v[:, 1:3], cov, tuple(r[6] for r in rows))
 
 
 def _read_objects(path: Path) -> list[ObjectTruth]:

@@ -7,15 +7,23 @@ Topic map (TOML; ``semslam bag info BAG`` prints a suggestion)::
     [topics]
     scans = "/laser/points"          # sensor_msgs/PointCloud2 (scanner frame; per-point time fields honoured)
     attitude = "/imu/data"           # sensor_msgs/Imu orientation
-    dvl = "/dvl/twist"               # geometry_msgs/TwistWithCovarianceStamped, nav_msgs/Odometry (twist), or a
-                                     # vendor message with `velocity` and optional `beam_ranges_m`/`beam_valid`
+    dvl = "/dvl/data"                # a DVL message (semslam.io.ros.dvl: COLA2, Water Linked, UUV Simulator,
+                                     # marine_acoustic_msgs, semslam_msgs), geometry_msgs/TwistWithCovarianceStamped,
+                                     # nav_msgs/Odometry (twist), or a vendor message with `velocity` and optional
+                                     # `beam_ranges_m`/`beam_valid`
     depth = "/pressure"              # sensor_msgs/FluidPressure (Pa), or nav_msgs/Odometry /
                                      # geometry_msgs/PoseWithCovarianceStamped (z)
+    gps = "/gps/fix"                 # sensor_msgs/NavSatFix (optional): surface position fixes
+    usbl = "/usbl/fix"               # sensor_msgs/NavSatFix (optional): acoustic fixes during the dive
+
+    [origin]                         # optional: the world frame's geodetic origin (else the first usable fix)
+    latitude_deg = 41.9785
+    longitude_deg = 2.8053
 
     [frames]
     vehicle_frame_id = "base_link"   # the vehicle in /tf_static: T_vehicle_scanner is read from it when present
     attitude = "enu"                 # "enu": REP-103 (ENU world, FLU body); "ned": NED world, FRD body (COLA2)
-    dvl = "flu"                      # "flu" (REP-103 body) or "frd"
+    dvl = "flu"                      # "flu" (REP-103 body) or "frd"; only for types that do not document theirs
     depth = "enu"                    # for pose/odometry depth topics: "enu" (depth = -z) or "ned" (depth = z)
 
 Stamps are the messages' header stamps, or the bag's receive time where a header stamp is zero, in seconds from
@@ -25,6 +33,7 @@ dropout.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -35,12 +44,17 @@ import numpy as np
 from .._progress import Progress, progress_steps
 from .._tables import read_table
 from ..errors import BagError, DatasetError
+from ..limits import check as check_limit
 from .vehicle import VehicleDescription
 
 SCAN_TYPES = ("sensor_msgs/msg/PointCloud2",)
+FIX_TYPES = ("sensor_msgs/msg/NavSatFix",)
 ATTITUDE_TYPES = ("sensor_msgs/msg/Imu",)
 TWIST_TYPES = ("geometry_msgs/msg/TwistWithCovarianceStamped", "geometry_msgs/msg/TwistStamped",
                "nav_msgs/msg/Odometry")
+#: DVL message types whose frame convention the type documents (semslam.io.ros.dvl)
+DVL_TYPES = ("semslam_msgs/msg/Dvl", "waterlinked_a50_ros_driver/msg/DVL", "dvl_msgs/msg/DVL", "cola2_msgs/msg/DVL",
+             "uuv_sensor_ros_plugins_msgs/msg/DVL", "marine_acoustic_msgs/msg/Dvl")
 DEPTH_TYPES = ("sensor_msgs/msg/FluidPressure", "nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseWithCovarianceStamped",
                "geometry_msgs/msg/PoseStamped")
 _G = 9.80665
@@ -54,46 +68,80 @@ class TopicMap:
     attitude: str | None = None
     dvl: str | None = None
     depth: str | None = None
+    gps: str | None = None
+    usbl: str | None = None
     attitude_frame: str = "enu"
-    dvl_frame: str = "flu"
+    #: the DVL's axes ("frd" or "flu"); None: the ones its message type documents (an error when it documents none)
+    dvl_frame: str | None = None
     depth_frame: str = "enu"
     #: the vehicle's frame in the bag's /tf_static tree (its axes: FLU, or FRD when ``attitude_frame`` is "ned")
     vehicle_frame_id: str = "base_link"
+    #: the world frame's geodetic origin ({latitude_deg, longitude_deg[, height_m]}), None: the first usable fix
+    origin: dict | None = None
 
     def __post_init__(self) -> None:
-        for name, allowed in (("attitude_frame", ("enu", "ned")), ("dvl_frame", ("flu", "frd")),
+        if self.origin is not None:
+            from ..geodesy import GeodeticOrigin
+
+            GeodeticOrigin.from_dict(self.origin, source="topic map's [origin]")  # checked here, one line if bad
+        for name, allowed in (("attitude_frame", ("enu", "ned")), ("dvl_frame", ("flu", "frd", None)),
                               ("depth_frame", ("enu", "ned"))):
             if getattr(self, name) not in allowed:
                 raise DatasetError(f"The topic map's frames.{name.removesuffix('_frame')} must be one of {allowed}. "
                                    f"Got {getattr(self, name)!r} instead.")
-        for name in ("scans", "attitude", "dvl", "depth"):
+        for name in ("scans", "attitude", "dvl", "depth", "gps", "usbl"):
             v = getattr(self, name)
             if v is not None and (not isinstance(v, str) or not v.startswith("/")):
                 raise DatasetError(f"The topic map's topics.{name} must be a topic name starting with '/'. "
                                    f"Got {v!r} instead.")
+        if not isinstance(self.vehicle_frame_id, str) or not self.vehicle_frame_id.strip("/ "):
+            raise DatasetError(f"The topic map's frames.vehicle_frame_id must be a frame name (a non-empty string). "
+                               f"Got {self.vehicle_frame_id!r} instead.")
+        named = [(n, getattr(self, n)) for n in ("scans", "attitude", "dvl", "depth", "gps", "usbl") if getattr(self, n)]
+        for i, (a, ta) in enumerate(named):  # one sensor per topic: a second one was silently dropped
+            for b, tb in named[i + 1:]:
+                if ta == tb:
+                    raise DatasetError(f"The topic map's topics.{a} and topics.{b} name the same topic {ta!r}: "
+                                       "semslam reads one sensor per topic.")
 
     def to_toml(self) -> str:
         d = asdict(self)
-        lines = ["[topics]"] + [f'{k} = "{d[k]}"' for k in ("scans", "attitude", "dvl", "depth") if d[k]]
-        lines += ["", "[frames]"] + [f'{k} = "{d[k + "_frame"]}"' for k in ("attitude", "dvl", "depth")]
+        lines = ["[topics]"] + [f'{k} = "{d[k]}"' for k in ("scans", "attitude", "dvl", "depth", "gps", "usbl") if d[k]]
+        lines += ["", "[frames]"] + [f'{k} = "{d[k + "_frame"]}"' for k in ("attitude", "dvl", "depth")
+                                     if d[k + "_frame"] is not None]
         lines.append(f'vehicle_frame_id = "{self.vehicle_frame_id}"')
+        if self.origin is not None:
+            lines += ["", "[origin]"] + [f"{k} = {float(v)!r}" for k, v in self.origin.items()]
         return "\n".join(lines) + "\n"
 
     @classmethod
     def from_dict(cls, d: Any, *, source: str = "topic map") -> "TopicMap":
-        if not isinstance(d, dict) or not set(d) <= {"topics", "frames"}:
-            raise DatasetError(f"The {source} must have the tables [topics] and [frames] only. Got "
+        if not isinstance(d, dict) or not set(d) <= {"topics", "frames", "origin"}:
+            raise DatasetError(f"The {source} must have the tables [topics], [frames] and [origin] only. Got "
                                f"{sorted(d) if isinstance(d, dict) else type(d).__name__} instead.")
         topics, frames = d.get("topics", {}), d.get("frames", {})
         if not isinstance(topics, dict) or not isinstance(frames, dict):
             raise DatasetError(f"The {source}'s [topics] and [frames] must be tables.")
         known = {"scans", "attitude", "dvl", "depth"}
-        for table, keys in (("topics", known), ("frames", (known - {"scans"}) | {"vehicle_frame_id"})):
+        for table, keys in (("topics", known | {"gps", "usbl"}), ("frames", (known - {"scans"}) | {"vehicle_frame_id"})):
             extra = sorted(set(d.get(table, {})) - keys)
             if extra:
                 raise DatasetError(f"The {source} has unknown key(s) {[f'{table}.{k}' for k in extra]}. Expected "
                                    f"some of {sorted(f'{table}.{k}' for k in keys)}.")
-        return cls(**topics, **{k if k == "vehicle_frame_id" else f"{k}_frame": v for k, v in frames.items()})
+        origin = d.get("origin")
+        if origin is not None:
+            from ..geodesy import GeodeticOrigin
+            from ..errors import SemslamError
+
+            try:
+                origin = GeodeticOrigin.from_dict(origin, source=f"{source}'s [origin]").as_dict()
+            except SemslamError as exc:
+                raise DatasetError(str(exc)) from None
+        try:
+            return cls(**topics, **{k if k == "vehicle_frame_id" else f"{k}_frame": v for k, v in frames.items()},
+                       origin=origin)
+        except DatasetError as exc:  # __post_init__'s one line, naming the file
+            raise DatasetError(str(exc).replace("The topic map's ", f"The {source}: ", 1)) from None
 
 
 def read_topic_map(path: str | os.PathLike) -> TopicMap:
@@ -102,16 +150,22 @@ def read_topic_map(path: str | os.PathLike) -> TopicMap:
 
 
 def suggest_topic_map(bag) -> TopicMap:
-    """The busiest topic of each sensor's accepted types (a vendor DVL: a type whose name contains 'dvl')."""
+    """The busiest topic of each sensor's accepted types. The DVL: a DVL message type semslam knows
+    (:data:`DVL_TYPES`, its frame set from the type), else a vendor type whose name contains 'dvl', else a
+    twist (frame left at the default: the type does not say)."""
+    from ..io.ros.dvl import topic_dvl_convention
+
     recs = bag.topics()
 
     def pick(types, also=lambda r: False):
         cands = [r for r in recs if r.msgtype in types or also(r)]
         return max(cands, key=lambda r: r.count).topic if cands else None
 
-    return TopicMap(scans=pick(SCAN_TYPES), attitude=pick(ATTITUDE_TYPES),
-                    dvl=pick(TWIST_TYPES[:2], lambda r: "dvl" in r.msgtype.lower()),
-                    depth=pick(DEPTH_TYPES[:1]))
+    dvl = (pick(DVL_TYPES) or pick((), lambda r: "dvl" in r.msgtype.lower() and r.msgtype not in DVL_TYPES)
+           or pick(TWIST_TYPES[:2]))
+    dvl_frame = topic_dvl_convention(bag, dvl) if dvl is not None else None
+    return TopicMap(scans=pick(SCAN_TYPES), attitude=pick(ATTITUDE_TYPES), dvl=dvl,
+                    depth=pick(DEPTH_TYPES[:1]), gps=pick(FIX_TYPES), **({"dvl_frame": dvl_frame} if dvl_frame else {}))
 
 
 def _stamp_ns(msg, stamp_ns: int) -> int:
@@ -121,10 +175,6 @@ def _stamp_ns(msg, stamp_ns: int) -> int:
     return int(stamp_ns)
 
 
-def _vec(v) -> np.ndarray:
-    return np.array([v.x, v.y, v.z], dtype=np.float64)
-
-
 class BagDecoder:
     """Turns the mapped topics' messages into semslam's units and frames (one method per sensor)."""
 
@@ -132,6 +182,11 @@ class BagDecoder:
         self.map, self.vehicle = topic_map, vehicle
 
     def attitude(self, msg) -> np.ndarray:
+        o = msg.orientation
+        norm = math.hypot(float(o.w), float(o.x), float(o.y), float(o.z))  # no overflow at 1e300
+        if not math.isnan(norm):  # NaN: no orientation, skipped by stream_bag
+            check_limit("bag.quaternion_norm", norm, f"The attitude topic {self.map.attitude!r}: an orientation "
+                        "quaternion's norm", error=BagError)
         from ..geometry import rpy_from_rotation
         from ..io.ros import imu_to_ned_frd
 
@@ -143,50 +198,47 @@ class BagDecoder:
         return rpy_from_rotation(rotation_from_quat_wxyz([o.w, o.x, o.y, o.z]))
 
     def dvl(self, msg, msgtype: str) -> tuple[np.ndarray, bool, np.ndarray | None]:
-        ranges = None
-        if msgtype == "nav_msgs/msg/Odometry":
-            v = _vec(msg.twist.twist.linear)
-        elif msgtype == "geometry_msgs/msg/TwistWithCovarianceStamped":
-            v = _vec(msg.twist.twist.linear)
-        elif msgtype == "geometry_msgs/msg/TwistStamped":
-            v = _vec(msg.twist.linear)
-        elif hasattr(msg, "velocity"):
-            v = _vec(msg.velocity)
-            if hasattr(msg, "beam_ranges_m"):
-                ranges = np.asarray(msg.beam_ranges_m, dtype=np.float64).copy()
-                if hasattr(msg, "beam_valid"):
-                    ranges[~np.asarray(msg.beam_valid, dtype=bool)] = np.nan
-        else:
-            raise BagError(f"The DVL topic {self.map.dvl!r} has type {msgtype}: expected one of {TWIST_TYPES} or a "
-                           "vendor message with a 'velocity' field.")
-        if self.map.dvl_frame == "flu":
-            v = np.array([v[0], -v[1], -v[2]])
-        valid = bool(np.isfinite(v).all()) and (ranges is None or bool(np.isfinite(ranges).any()))
-        return (v if valid else np.full(3, np.nan)), valid, ranges
+        """(velocity (3,) FRD axes of the DVL frame, valid, beam slant ranges or None). The topic map's
+        ``frames.dvl`` when it states one (the user's word: it overrides the type's), else the frame the type
+        documents (:mod:`semslam.io.ros.dvl`: COLA2, Water Linked, UUV Simulator, marine_acoustic_msgs, semslam's);
+        neither is an error, never a guess."""
+        from ..io.ros.dvl import decode_dvl, velocity_frd_from
+
+        r = decode_dvl(msg, msgtype, source=f"DVL topic {self.map.dvl!r}")
+        v = velocity_frd_from(r.velocity_mps, self.map.dvl_frame) if self.map.dvl_frame else r.velocity_frd_mps()
+        return (v if r.valid else np.full(3, np.nan)), r.valid, r.beam_ranges_m
 
     def depth(self, msg, msgtype: str) -> float:
+        where = f"The depth topic {self.map.depth!r}"
         if msgtype == "sensor_msgs/msg/FluidPressure":
             d = self.vehicle.depth
-            return (float(msg.fluid_pressure) - d.atmospheric_pressure_pa) / (d.water_density_kg_m3 * _G)
+            p = check_limit("bag.fluid_pressure_pa", float(msg.fluid_pressure), f"{where}: a fluid_pressure",
+                            error=BagError)
+            return (p - d.atmospheric_pressure_pa) / (d.water_density_kg_m3 * _G)
         pose = msg.pose.pose if msgtype in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseWithCovarianceStamped") \
             else msg.pose
         z = float(pose.position.z)
-        return -z if self.map.depth_frame == "enu" else z
+        return check_limit("nav.depth_m", -z if self.map.depth_frame == "enu" else z, f"{where}: a depth",
+                           error=BagError)
 
 
 def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
                time_origin_ns: list | None = None) -> Iterator[tuple[float, str, Any]]:
     """The mapped topics' messages in bag order as ``(stamp_s, kind, payload)``: ``attitude`` -> rpy (3,),
     ``dvl`` -> (velocity (3,) body FRD, valid, beam ranges or None), ``depth`` -> depth_m, ``scan`` ->
-    :class:`~semslam.io.ros.PointCloud2Data`. Checks that every mapped topic exists with an accepted type.
+    :class:`~semslam.io.ros.PointCloud2Data`, ``fix`` -> (latitude_deg, longitude_deg, height_m, covariance
+    north/east (2, 2) m^2 (NaN when the receiver has no fix or does not know it), source ``"gps"``/``"usbl"``).
+    Checks that every mapped topic exists with an accepted type.
 
-    Stamps are seconds from a time origin: the whole second at or before the first message (integer
+    Stamps are seconds from a time origin: the whole second at or before the bag's first message, whatever its
+    topic (integer
     nanoseconds until then, so that float64 keeps sub-microsecond resolution on epoch times); it is stored into
     ``time_origin_ns`` (a one-element list) when given."""
     from ..io.ros import decode_pointcloud2
 
     kinds = {}
-    for kind, types in (("scans", SCAN_TYPES), ("attitude", ATTITUDE_TYPES), ("dvl", ()), ("depth", DEPTH_TYPES)):
+    for kind, types in (("scans", SCAN_TYPES), ("attitude", ATTITUDE_TYPES), ("dvl", ()), ("depth", DEPTH_TYPES),
+                        ("gps", FIX_TYPES), ("usbl", FIX_TYPES)):
         topic = getattr(topic_map, kind)
         if topic is not None:
             rec = bag.require_topic(topic, types)
@@ -194,7 +246,12 @@ def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
     if topic_map.attitude is None:
         raise BagError("The topic map names no attitude topic: the filter needs the attitude as input.")
     dec = BagDecoder(topic_map, vehicle)
-    origin = None
+    # the clock's origin: the whole second before the bag's first message over ALL its topics, so that two readings
+    # of one bag with different topic maps (with and without the GPS, say) share one clock
+    start = getattr(bag, "start_time_ns", None)
+    origin = None if start is None else start - start % 1_000_000_000
+    if origin is not None and time_origin_ns is not None:
+        time_origin_ns[:] = [origin]
     for m in bag.messages(list(kinds)):
         kind, msgtype = kinds[m.topic]
         ns = _stamp_ns(m.msg, m.stamp_ns)
@@ -211,8 +268,22 @@ def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
             yield t, "dvl", dec.dvl(m.msg, msgtype)
         elif kind == "depth":
             yield t, "depth", dec.depth(m.msg, msgtype)
+        elif kind in ("gps", "usbl"):
+            yield t, "fix", navsatfix_ne(m.msg) + (kind,)
         else:
             yield t, "scan", decode_pointcloud2(m.msg, source=f"topic {m.topic}")
+
+
+def navsatfix_ne(msg) -> tuple[float, float, float, np.ndarray]:
+    """A ``sensor_msgs/NavSatFix`` as (latitude_deg, longitude_deg, height_m, covariance (2, 2) m^2 north/east). The
+    message's covariance is ENU (REP-103) row-major; a fix whose status is below STATUS_FIX (0), whose covariance
+    type is COVARIANCE_TYPE_UNKNOWN (0), or whose numbers are not finite gets a NaN covariance: not usable."""
+    c = np.asarray(msg.position_covariance, dtype=np.float64).reshape(3, 3)
+    cov = np.array([[c[1, 1], c[1, 0]], [c[0, 1], c[0, 0]]])
+    status = int(getattr(getattr(msg, "status", None), "status", 0))
+    if status < 0 or int(msg.position_covariance_type) == 0 or not np.isfinite(cov).all():
+        cov = np.full((2, 2), np.nan)
+    return float(msg.latitude), float(msg.longitude), float(msg.altitude), cov
 
 
 def static_extrinsic(bag, parent_frame: str, child_frame: str):
@@ -273,14 +344,39 @@ def _write_scan(payload, t: float, scratch: Path, index: int):
     return ScanRecord(index, t + float(offs.min()), t + float(offs.max()), path, cloud.n_points)
 
 
+def fixes_in_local_frame(rows, origin: dict | None):
+    """``[(stamp_s, (lat, lon, h, cov_ne, source))]`` as a :class:`PositionFixLog` in local NED about ``origin`` (the
+    topic map's), else about the first usable fix; ``(None, None)`` without fixes."""
+    from ..geodesy import GeodeticOrigin
+    from .logs import PositionFixLog
+
+    if not rows:
+        return None, None
+    if origin is not None:
+        geo = GeodeticOrigin.from_dict(origin)
+    else:
+        first = next((p for _, p in rows if np.isfinite(p[3]).all() and np.isfinite(p[:3]).all()), None)
+        if first is None:
+            return None, None
+        geo = GeodeticOrigin(first[0], first[1], 0.0)
+    lat = np.array([p[0] for _, p in rows])
+    lon = np.array([p[1] for _, p in rows])
+    ok = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90) & (np.abs(lon) <= 180)
+    ne = np.full((len(rows), 2), np.nan)
+    if ok.any():
+        ne[ok] = geo.ned_from_geodetic_deg(lat[ok], lon[ok], 0.0)[:, 0:2]
+    cov = np.array([p[3] for _, p in rows]).reshape(-1, 2, 2)
+    return PositionFixLog([t for t, _ in rows], ne, cov, tuple(p[4] for _, p in rows)), geo
+
+
 def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic_map: TopicMap | None = None,
                vehicle: VehicleDescription | None = None, msg_dirs=(), overwrite: bool = False,
                progress: Progress = False) -> Path:
     """Convert a bag into a mission directory (format 2; scans as PCD with a per-point ``t`` field in seconds
     from the scan's start). Scans are written as they come; the directory appears only when complete."""
     import shutil
-    import tempfile
 
+    from .._outdir import check_output_dir, staging_dir
     from ..io.ros import open_bag
     from .dataset import Dataset
     from .logs import AttitudeLog, DepthLog, DvlLog
@@ -288,16 +384,18 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
 
     vehicle = VehicleDescription.girona500() if vehicle is None else vehicle
     out = Path(out_dir)
+    # before any work: only an earlier mission semslam proves it wrote is replaced, never the bag (semslam._outdir)
+    check_output_dir(out, overwrite=overwrite, kind="mission", inputs=(bag_path,))
     if out.exists() and not overwrite:
         raise DatasetError(f"The output directory {str(out)!r} exists: choose another, or overwrite it.")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".scans", dir=out.parent))
-    logs: dict[str, list] = {"attitude": [], "dvl": [], "depth": []}
+    scratch = staging_dir(out, "scans")
+    logs: dict[str, list] = {"attitude": [], "dvl": [], "depth": [], "fix": []}
     records = []
     try:
         with open_bag(bag_path, msg_dirs=msg_dirs) as bag:
             tmap = topic_map or suggest_topic_map(bag)
-            total = sum(r.count for r in bag.topics() if r.topic in (tmap.scans, tmap.attitude, tmap.dvl, tmap.depth))
+            total = sum(r.count for r in bag.topics()
+                        if r.topic in (tmap.scans, tmap.attitude, tmap.dvl, tmap.depth, tmap.gps, tmap.usbl))
             origin: list = [0]
             extrinsics = None
             with progress_steps(progress, total, "bag", "msg") as step:
@@ -313,6 +411,7 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
         att = sorted(logs["attitude"], key=lambda r: r[0])
         dvl = sorted(logs["dvl"], key=lambda r: r[0])
         dep = sorted(logs["depth"], key=lambda r: r[0])
+        fixes, geo = fixes_in_local_frame(sorted(logs["fix"], key=lambda r: r[0]), tmap.origin)
         nb = max((len(r[1][2]) for r in dvl if r[1][2] is not None), default=0)
         beams = None
         if nb and nb == len(vehicle.dvl.beam_azimuth_rad):
@@ -324,7 +423,8 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
                      DepthLog([r[0] for r in dep], [r[1] for r in dep]),
                      scans=sorted(records, key=lambda r: r.start_stamp_s), directory=scratch,
                      metadata={"source": {"bag": str(bag_path), "topics": asdict(tmap), "time_origin_ns": origin[0],
-                                          "T_vehicle_scanner_from": extrinsics or "vehicle file"}})
+                                          "T_vehicle_scanner_from": extrinsics or "vehicle file"}},
+                     fixes=fixes, geodetic_origin=geo)
         if not len(ds.attitude):
             raise BagError(f"Bag {str(bag_path)!r}: the attitude topic {tmap.attitude!r} has no usable message.")
         return write_mission(ds, out, overwrite=overwrite)
@@ -332,5 +432,6 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-__all__ = ["TopicMap", "read_topic_map", "suggest_topic_map", "stream_bag", "export_bag", "BagDecoder",
-           "SCAN_TYPES", "ATTITUDE_TYPES", "TWIST_TYPES", "DEPTH_TYPES"]
+__all__ = ["TopicMap", "read_topic_map", "suggest_topic_map", "stream_bag", "export_bag", "BagDecoder", "FIX_TYPES",
+           "navsatfix_ne",
+           "SCAN_TYPES", "ATTITUDE_TYPES", "TWIST_TYPES", "DVL_TYPES", "DEPTH_TYPES"]

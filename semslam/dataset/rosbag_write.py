@@ -8,12 +8,11 @@ reads it back is :data:`SEMSLAM_TOPICS`. Stamps start at :data:`TIME_ORIGIN_NS` 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .._outdir import check_output_dir, check_output_file, staged_output_dir, staged_output_file
 from ..errors import DatasetError
 from .dataset import Dataset
 from .rosbag import TopicMap
@@ -31,6 +30,19 @@ float64 figure_of_merit          # vendor quality figure (m/s)
 SEMSLAM_TOPICS = TopicMap(scans="/semslam/scans", attitude="/semslam/imu", dvl="/semslam/dvl", depth="/semslam/pressure",
                           attitude_frame="enu", dvl_frame="frd")
 _G = 9.80665
+
+
+def topic_map_of(dataset: Dataset) -> TopicMap:
+    """The topic map of the bag :func:`write_bag` writes for ``dataset``: :data:`SEMSLAM_TOPICS`, plus the GPS and
+    USBL topics and the geodetic origin when the dataset has position fixes."""
+    from dataclasses import replace
+
+    f = dataset.fixes
+    if f is None:
+        return SEMSLAM_TOPICS
+    return replace(SEMSLAM_TOPICS, gps="/semslam/gps" if "gps" in f.source else None,
+                   usbl="/semslam/usbl" if "usbl" in f.source else None,
+                   origin=None if dataset.geodetic_origin is None else dataset.geodetic_origin.as_dict())
 
 
 def _ns(t: float) -> int:
@@ -73,6 +85,7 @@ def _messages(ds: Dataset, store, T):
         msg = T["sensor_msgs/msg/FluidPressure"](header=ros_header(store, _ns(t), "pressure"), fluid_pressure=p,
                                                  variance=(dep.water_density_kg_m3 * _G * dep.noise_m) ** 2)
         out.append((_ns(t), 2, "/semslam/pressure", "sensor_msgs/msg/FluidPressure", msg))
+    out += _fix_messages(ds, store, T)
     for rec in ds.scans:
         cloud = ds.load_scan(rec.scan_id)
         stamps = ds.point_stamps_s(rec, cloud)
@@ -98,8 +111,34 @@ def _messages(ds: Dataset, store, T):
     return [(ns, topic, mt, msg) for ns, _, topic, mt, msg in out]
 
 
+def _fix_messages(ds: Dataset, store, T) -> list:
+    """Position fixes as ``sensor_msgs/NavSatFix`` (covariance ENU, REP-103), GPS on /semslam/gps, USBL on
+    /semslam/usbl, geodetic about the dataset's origin."""
+    from ..geodesy import GeodeticOrigin
+    from ..io.ros._encode import ros_header
+
+    f = ds.fixes
+    if f is None or not len(f):
+        return []
+    geo = ds.geodetic_origin or GeodeticOrigin(0.0, 0.0, 0.0)
+    out = []
+    llh = geo.geodetic_deg_from_ned(np.c_[f.position_ne_m, np.zeros(len(f))])
+    for k, t in enumerate(f.stamp_s):
+        c = f.covariance_ne_m2[k]
+        enu = np.array([[c[1, 1], c[1, 0], 0.0], [c[0, 1], c[0, 0], 0.0], [0.0, 0.0, max(c[0, 0], c[1, 1])]])
+        src = f.source[k]
+        msg = T["sensor_msgs/msg/NavSatFix"](
+            header=ros_header(store, _ns(t), src), status=T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
+            latitude=float(llh[k, 0]), longitude=float(llh[k, 1]), altitude=float(llh[k, 2]),
+            position_covariance=enu.reshape(-1), position_covariance_type=3)
+        out.append((_ns(t), 2, f"/semslam/{src}", "sensor_msgs/msg/NavSatFix", msg))
+    return out
+
+
 def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap", *, overwrite: bool = False) -> Path:
-    """Write ``dataset`` as a bag (see the module docstring); atomic (a temporary sibling, renamed at the end)."""
+    """Write ``dataset`` as a bag (see the module docstring); atomic (a staging sibling, renamed at the end). An
+    existing bag is replaced only with ``overwrite``; a bag directory (ROS 2) only when semslam's ownership marker
+    proves it wrote it (:mod:`semslam._outdir`)."""
     from rosbags.typesys import get_types_from_msg
 
     from ..io.ros._encode import default_typestore
@@ -107,40 +146,40 @@ def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap",
     if fmt not in FORMATS:
         raise DatasetError(f"The 'fmt' argument of write_bag must be one of {FORMATS}. Got {fmt!r} instead.")
     out = Path(path)
-    if out.exists() and not overwrite:
-        raise DatasetError(f"The bag {str(out)!r} exists: choose another path, or overwrite it.")
     ros1 = fmt == "ros1"
+    # only with overwrite, and a bag directory only when semslam's marker proves it wrote it (semslam._outdir)
+    if (out.exists() or out.is_symlink()) and not overwrite:
+        raise DatasetError(f"The bag {str(out)!r} exists: choose another path, or overwrite it.")
+    inputs = (dataset.directory,)
+    (check_output_file(out, overwrite=overwrite, option="path", inputs=inputs) if ros1 else
+     check_output_dir(out, overwrite=overwrite, kind="bag", option="path", inputs=inputs))
     store = default_typestore(ros1=ros1)
     store.register(get_types_from_msg(DVL_MSG, DVL_TYPE))
     if "tf2_msgs/msg/TFMessage" not in store.types:  # rosbags' ROS 1 Noetic store lacks it
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     msgs = _messages(dataset, store, store.types)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
-    tmp = tmpdir / out.name
-    try:
-        if ros1:
-            from rosbags.rosbag1 import Writer
+    if ros1:
+        from rosbags.rosbag1 import Writer
 
-            with Writer(tmp) as writer:
-                conns = {}
-                for ns, topic, mt, msg in msgs:
-                    if topic not in conns:
-                        conns[topic] = writer.add_connection(topic, mt, typestore=store)
-                    writer.write(conns[topic], ns, store.serialize_ros1(msg, mt))
-        else:
-            from rosbags.rosbag2 import StoragePlugin, Writer
+        with staged_output_file(out, overwrite=overwrite, option="path", inputs=inputs) as tmp, Writer(tmp) as writer:
+            conns = {}
+            for ns, topic, mt, msg in msgs:
+                if topic not in conns:
+                    conns[topic] = writer.add_connection(topic, mt, typestore=store)
+                writer.write(conns[topic], ns, store.serialize_ros1(msg, mt))
+        return out
+    from rosbags.rosbag2 import StoragePlugin, Writer
 
-            plugin = StoragePlugin.MCAP if fmt == "ros2-mcap" else StoragePlugin.SQLITE3
-            with Writer(tmp, version=9, storage_plugin=plugin) as writer:
-                conns = {}
-                for ns, topic, mt, msg in msgs:
-                    if topic not in conns:
-                        conns[topic] = writer.add_connection(topic, mt, typestore=store)
-                    writer.write(conns[topic], ns, store.serialize_cdr(msg, mt))
-        if out.exists():
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
+    plugin = StoragePlugin.MCAP if fmt == "ros2-mcap" else StoragePlugin.SQLITE3
+    with staged_output_dir(out, overwrite=overwrite, kind="bag", option="path", inputs=inputs) as stage:
+        inner = stage / out.name  # rosbags names the storage file after its directory: NAME.mcap / NAME.db3
+        with Writer(inner, version=9, storage_plugin=plugin) as writer:
+            conns = {}
+            for ns, topic, mt, msg in msgs:
+                if topic not in conns:
+                    conns[topic] = writer.add_connection(topic, mt, typestore=store)
+                writer.write(conns[topic], ns, store.serialize_cdr(msg, mt))
+        for f in list(inner.iterdir()):
+            os.replace(f, stage / f.name)
+        inner.rmdir()
     return out

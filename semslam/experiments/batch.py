@@ -2,7 +2,8 @@
 directory ``RUNS/<dive name>/`` as Dask tasks (or serially), then writes the batch's tables and index::
 
     RUNS/
-      <dive>/            one complete run directory per dive that succeeded (marker .semslam-run)
+      .semslam-run       the ownership marker of the batch's folder (semslam._outdir)
+      <dive>/            one complete run directory per dive that succeeded (its own marker .semslam-run)
       summary.csv        per dive: status, duration, detections, landmarks and ATE per mode, error
       summary.md         the same table in markdown
       index.html         the table, linking each dive's report
@@ -16,7 +17,9 @@ Each dive is one task: ``process(dive, out_dir, options)`` writes into a staged 
 ``RUNS/<dive>/`` only when complete (:func:`semslam._outdir.staged_output_dir`), so a dive interrupted half-way
 (a killed worker, a power cut) is never taken for a complete one; its task is re-run by the scheduler. A dive that
 raises fails alone: its error is in the summary and the other dives finish. A dive whose run directory is already
-complete is skipped (its row read back from the directory) unless ``overwrite``.
+complete is skipped (its row read back from the directory) unless ``overwrite``. ``RUNS`` itself must be new,
+empty, or a folder an earlier batch made (its ownership marker, :mod:`semslam._outdir`): the tables are never
+written into a foreign folder. A killed task's staging folder (``.<dive>.semslam-<pid>-*.tmp``) is left alone.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from .._atomic import atomic_write_text
-from .._outdir import MARKER, staged_output_dir
+from .._outdir import claim_output_dir, is_owned, staged_output_dir
 from .._progress import Progress
 from ..errors import InputError
 
@@ -82,7 +85,8 @@ def run_batch(dives: Sequence[str | Path], out: str | Path, process: Callable[[P
             raise InputError(f"The dives {names[n]!r} and {str(d)!r} would share the run directory {n!r}: "
                              "give dives with distinct names.")
         names[n] = str(d)
-    root.mkdir(parents=True, exist_ok=True)
+    # a new folder, or one an earlier batch made (its marker proves it): never a foreign one, never a dive's
+    claim_output_dir(root, kind="batch", inputs=dives)
     items = [{"dive": str(d), "run": str(root / n), "overwrite": overwrite} for n, d in names.items()]
     task = partial(run_dive, process=process, options=dict(options or {}))
 
@@ -108,7 +112,7 @@ def run_dive(item: dict, *, process: Callable, options: dict) -> dict:
     with ``action`` and ``wall_s``. Never raises for a dive's own error: the row carries it."""
     t0 = time.perf_counter()
     run = Path(item["run"])
-    if (run / MARKER).is_file() and not item["overwrite"]:
+    if is_owned(run, "run") and not item["overwrite"]:
         return {**row_from_run_dir(run, item["dive"]), "action": "skipped", "wall_s": time.perf_counter() - t0}
     try:
         with staged_output_dir(run, overwrite=item["overwrite"], option="--out") as tmp:
@@ -134,11 +138,16 @@ def row_from_run_dir(run: Path, source: str) -> dict:
         if (d / METRICS).is_file():
             m = json.loads((d / METRICS).read_text(encoding="utf-8"))
             modes[d.name] = {"landmarks": m.get("n_landmarks"), "ate_m": m.get("ate_rmse_m"),
-                             "duration_s": m.get("duration_s")}
+                             "duration_s": m.get("duration_s"), "health": (m.get("health") or {}).get("verdict")}
     det = run / DETECTIONS
     n_det = sum(1 for line in det.read_text(encoding="utf-8").splitlines() if line.strip()) if det.is_file() else None
     duration = next((v["duration_s"] for v in modes.values() if v["duration_s"] is not None), None)
-    return {"dive": run.name, "source": source, "status": "ok", "error": "", "duration_s": duration,
+    # the run's health verdict (run.json): a dive that ran but went wrong is "bad", never "ok"
+    verdict = "ok"
+    if (run / "run.json").is_file():
+        verdict = json.loads((run / "run.json").read_text(encoding="utf-8")).get("verdict", "ok")
+    status = "bad" if verdict == "bad" else "ok"
+    return {"dive": run.name, "source": source, "status": status, "health": verdict, "error": "", "duration_s": duration,
             "detections": n_det, "modes": modes, "report": "report.html" if (run / "report.html").is_file() else None}
 
 

@@ -100,20 +100,10 @@ class MonteCarloResult:
         return "\n".join(rows)
 
 
-def truth_run(mission, mode: str, config: SlamConfig, seed: int, backend: str = "ekf"):
+def truth_run(mission, mode: str, config: SlamConfig, seed: int, backend: str = "ekf", surveyed=()):
     """:func:`run_truth_slam` on ``backend`` (``ekf``, ``isam2``, ``batch``): the same truth-based detections and
-    seeds for every backend."""
-    if backend == "ekf":
-        return run_truth_slam(mission, mode=mode, config=config, seed=seed)
-    from .._validation import as_rng
-    from ..simulation.detections import simulate_detections
-    from ..simulation.truth_slam import builtin_symmetries, truth_detection_config
-    from ..slam import run_slam
-
-    sym = builtin_symmetries()
-    rng = as_rng(seed, caller="truth_run")
-    dets = {} if mode == "dr" else simulate_detections(mission, truth_detection_config(mission), seed=rng, symmetries=sym)
-    return run_slam(mission, dets, mode=mode, config=config, seed=seed, symmetries=sym, backend=backend)
+    seeds for every backend; ``surveyed``: objects given to the run as a (simulated) survey."""
+    return run_truth_slam(mission, mode=mode, config=config, seed=seed, backend=backend, surveyed=surveyed)
 
 
 def _montecarlo_run(i: int, *, opts: dict) -> dict:
@@ -125,7 +115,7 @@ def _montecarlo_run(i: int, *, opts: dict) -> dict:
     cfg = SlamConfig().updated(**opts["config_overrides"])
     out = {}
     for mode in opts["modes"]:
-        res = truth_run(mission, mode, cfg, seed, opts.get("backend", "ekf"))
+        res = truth_run(mission, mode, cfg, seed, opts.get("backend", "ekf"), opts.get("surveyed", ()))
         if res.truth_position_ned_m is None:
             raise SlamError("Monte-Carlo runs need missions with ground truth.")
         e = res.position_ned_m - res.truth_position_ned_m
@@ -145,11 +135,12 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
                    progress: Progress = False, log: Callable[[str], None] | None = None,
                    yaw_bias_walk_deg_per_sqrt_s: float = 0.0,
                    white_dvl: bool = False, jobs: int = 1, scheduler: str | None = None,
-                   client=None, backend: str = "ekf") -> MonteCarloResult:
+                   client=None, backend: str = "ekf", surveyed=()) -> MonteCarloResult:
     """Run ``n_runs`` seeded missions in each of ``modes``; see the module docstring.
 
     ``yaw_bias_deg`` / ``yaw_bias_walk_deg_per_sqrt_s``: AHRS yaw bias of the missions (constant, random walk);
-    ``config_overrides``: SlamConfig settings (e.g. ``{"surveyed_objects": ["reducing_socket_0"]}``);
+    ``config_overrides``: SlamConfig settings (e.g. ``{"initial_position_sigma_m": 0.01}``); ``surveyed``: names of
+    objects given to every run as a survey (drawn around their true poses, as a surveyor's, seeded per run);
     ``progress``: a bar or ``progress(done, total)`` per run and mode (:mod:`semslam._progress`); ``log``: one line
     per run and mode (its ATE). ``jobs`` / ``scheduler`` / ``client``: the engine (serial in this process, a local Dask
     cluster of ``jobs`` processes, a running cluster; :func:`semslam.experiments._dask.map_tasks`): same result.
@@ -180,7 +171,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     stamps = None
     opts = {"seed": seed, "modes": modes, "yaw_bias_rad": math.radians(yaw_bias_deg), "source": source, "loops": loops,
             "yaw_bias_walk_rad_per_sqrt_s": math.radians(yaw_bias_walk_deg_per_sqrt_s), "white_dvl": white_dvl,
-            "config_overrides": dict(config_overrides or {}), "backend": backend}
+            "config_overrides": dict(config_overrides or {}), "backend": backend, "surveyed": tuple(surveyed)}
     with progress_steps(progress, n_runs * len(modes), "Monte Carlo", "run") as step:
         def done(i: int, run: dict) -> None:  # as each run ends (in any order on a cluster)
             for mode in modes:

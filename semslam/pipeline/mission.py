@@ -39,15 +39,20 @@ class MissionDetections:
         return sum(len(v) for v in self.detections_by_scan.values())
 
     def summary(self) -> dict:
-        total = np.array([s["timings_ms"].get("total", np.nan) for s in self.scans]) if self.scans else np.zeros(0)
-        return {
-            "n_scans": len(self.scans),
-            "n_clusters": int(sum(s["n_clusters"] for s in self.scans)),
-            "n_detections": int(sum(s["n_detections"] for s in self.scans)),
-            "n_kept": self.n_detections,
-            "scan_latency_ms_median": float(np.median(total)) if total.size else float("nan"),
-            "scan_latency_ms_p90": float(np.percentile(total, 90)) if total.size else float("nan"),
-        }
+        return detection_summary(self.scans, self.n_detections)
+
+
+def detection_summary(scans: list[dict], n_kept: int) -> dict:
+    """Counts and scan latencies of per-scan statistics (:func:`detect_scan`'s)."""
+    total = np.array([s["timings_ms"].get("total", np.nan) for s in scans]) if scans else np.zeros(0)
+    return {
+        "n_scans": len(scans),
+        "n_clusters": int(sum(s["n_clusters"] for s in scans)),
+        "n_detections": int(sum(s["n_detections"] for s in scans)),
+        "n_kept": int(n_kept),
+        "scan_latency_ms_median": float(np.median(total)) if total.size else float("nan"),
+        "scan_latency_ms_p90": float(np.percentile(total, 90)) if total.size else float("nan"),
+    }
 
 
 #: an attitude sample farther than this from a scan's middle does not give that scan an up direction
@@ -58,17 +63,36 @@ def up_in_scanner(dataset: Dataset, stamp_s: float) -> np.ndarray | None:
     """The world's up (NED: ``(0, 0, -1)``) in the scanner frame at ``stamp_s``, from the attitude log (roll and pitch
     interpolated; yaw does not move up) and the scanner's mounting: ``(R_world_vehicle R_vehicle_scanner)^T
     (0, 0, -1)``. None when no attitude sample lies within :data:`MAX_ATTITUDE_GAP_S` of ``stamp_s``."""
+    return up_from_attitude_samples(dataset.attitude.stamp_s, dataset.attitude.rpy_rad,
+                                    dataset.vehicle.scanner.T_vehicle_scanner, stamp_s)
+
+
+def up_from_attitude_samples(stamps_s: np.ndarray, rpy_rad: np.ndarray, T_vehicle_scanner, stamp_s: float):
+    """:func:`up_in_scanner` from attitude samples (a streaming runner's recent history)."""
     from ..geometry import rotation_from_rpy
 
-    log = dataset.attitude
-    t = log.stamp_s
+    t = np.asarray(stamps_s, dtype=float)
     if not len(t) or np.min(np.abs(t - stamp_s)) > MAX_ATTITUDE_GAP_S:
         return None
-    roll = np.interp(stamp_s, t, np.unwrap(log.rpy_rad[:, 0]))
-    pitch = np.interp(stamp_s, t, np.unwrap(log.rpy_rad[:, 1]))
+    rpy = np.asarray(rpy_rad, dtype=float).reshape(-1, 3)
+    roll = np.interp(stamp_s, t, np.unwrap(rpy[:, 0]))
+    pitch = np.interp(stamp_s, t, np.unwrap(rpy[:, 1]))
     R_wv = rotation_from_rpy(float(roll), float(pitch), 0.0)
-    R_vs = np.asarray(dataset.T_vehicle_scanner.matrix, dtype=float)[:3, :3]
+    R_vs = np.asarray(T_vehicle_scanner.matrix, dtype=float)[:3, :3]
     return (R_wv @ R_vs).T @ np.array([0.0, 0.0, -1.0])
+
+
+def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_s: float, end_stamp_s: float,
+                point_stamps_s, seed: int = 0, keep_unreliable: bool = False, up_scanner=None):
+    """One scan through the recogniser (seed ``scan_seed(seed, scan_id)``): ``(kept detections, statistics,
+    result)``. The one step every runner takes per scan (:func:`detect_mission`, :mod:`semslam.run`)."""
+    result = recognizer.recognize(cloud, seed=scan_seed(seed, scan_id), stamp_s=end_stamp_s, scan_id=scan_id,
+                                  point_stamps_s=point_stamps_s, up_scanner=up_scanner)
+    kept = [d for d in result.detections if d.reliable or keep_unreliable]
+    stats = {"scan_id": scan_id, "stamp_s": end_stamp_s, "n_points": cloud.n_points,
+             "n_clusters": len(result.clusters), "n_detections": len(result.detections),
+             "n_kept": len(kept), "timings_ms": dict(result.timings_ms)}
+    return kept, stats, result
 
 
 def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
@@ -107,14 +131,12 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
             cloud = dataset.load_scan(rec.scan_id)
             stamps = dataset.point_stamps_s(rec, cloud)
             up = up_in_scanner(dataset, 0.5 * (rec.start_stamp_s + rec.end_stamp_s)) if up_from_attitude else None
-            result = recognizer.recognize(cloud, seed=scan_seed(seed, rec.scan_id), stamp_s=rec.end_stamp_s,
-                                          scan_id=rec.scan_id, point_stamps_s=stamps, up_scanner=up)
-            kept = [d for d in result.detections if d.reliable or keep_unreliable]
+            kept, stats, result = detect_scan(recognizer, cloud, scan_id=rec.scan_id, start_stamp_s=rec.start_stamp_s,
+                                              end_stamp_s=rec.end_stamp_s, point_stamps_s=stamps, seed=seed,
+                                              keep_unreliable=keep_unreliable, up_scanner=up)
             if kept:
                 out.detections_by_scan[rec.scan_id] = kept
-            out.scans.append({"scan_id": rec.scan_id, "stamp_s": rec.end_stamp_s, "n_points": cloud.n_points,
-                              "n_clusters": len(result.clusters), "n_detections": len(result.detections),
-                              "n_kept": len(kept), "timings_ms": dict(result.timings_ms)})
+            out.scans.append(stats)
             if on_scan is not None:
                 on_scan(rec, cloud, result)
             step()

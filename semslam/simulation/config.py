@@ -312,6 +312,49 @@ class DepthConfig(_Dict):
 
 
 @dataclass(frozen=True)
+class FixConfig(_Dict):
+    """Position fixes as a vehicle records them (off by default: the papers' indoor tank has no GPS).
+
+    ``gps_count`` surface GPS fixes (``sensor_msgs/NavSatFix``) at ``gps_rate_hz``, the last one
+    ``gps_before_start_s`` before the dive starts, with the vehicle at the surface above its start point (it then
+    dives straight down). Their error is a per-dive constant (``gps_bias_sigma_m`` per axis: multipath, the
+    constellation) plus white noise (``gps_noise_m``); each fix states the covariance of both, as a receiver's
+    reported accuracy would. ``usbl_rate_hz`` > 0 adds USBL fixes during the dive (white, ``usbl_noise_m`` per
+    horizontal axis). The world frame is local NED about (``origin_latitude_deg``, ``origin_longitude_deg``)."""
+
+    gps_count: int = 0
+    gps_rate_hz: float = 1.0
+    gps_before_start_s: float = 5.0
+    gps_bias_sigma_m: float = 2.0
+    gps_noise_m: float = 0.5
+    usbl_rate_hz: float = 0.0
+    usbl_noise_m: float = 0.3
+    origin_latitude_deg: float = 41.9785
+    origin_longitude_deg: float = 2.8053
+
+    def __post_init__(self) -> None:
+        _check(self, positive=("gps_rate_hz", "gps_before_start_s"),
+               nonneg=("gps_bias_sigma_m", "gps_noise_m", "usbl_rate_hz", "usbl_noise_m"))
+        if isinstance(self.gps_count, bool) or not isinstance(self.gps_count, int) or not 0 <= self.gps_count <= 3600:
+            raise SimulationError(f"The 'gps_count' field of FixConfig must be an integer in [0, 3600]. Got "
+                                  f"{self.gps_count!r} instead.")
+        if self.gps_count and self.gps_bias_sigma_m ** 2 + self.gps_noise_m ** 2 <= 0:
+            raise SimulationError("The GPS fixes of FixConfig need a non-zero error (gps_bias_sigma_m or gps_noise_m): "
+                                  "a fix with a zero covariance cannot be fused.")
+        if self.usbl_rate_hz and self.usbl_noise_m <= 0:
+            raise SimulationError("The 'usbl_noise_m' field of FixConfig must be > 0 with USBL fixes.")
+        _check(self, nonneg=())
+        if not (-90 < self.origin_latitude_deg < 90 and -180 <= self.origin_longitude_deg <= 180):
+            raise SimulationError("The origin of FixConfig must be a latitude in (-90, 90) and a longitude in "
+                                  f"[-180, 180] (degrees). Got {self.origin_latitude_deg!r}, "
+                                  f"{self.origin_longitude_deg!r} instead.")
+
+    @property
+    def any(self) -> bool:
+        return self.gps_count > 0 or self.usbl_rate_hz > 0
+
+
+@dataclass(frozen=True)
 class SimulatorConfig(_Dict):
     """Everything :func:`semslam.simulation.simulate_mission` needs (the seed is separate)."""
 
@@ -321,6 +364,7 @@ class SimulatorConfig(_Dict):
     dvl: DvlConfig = field(default_factory=DvlConfig)
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
     depth: DepthConfig = field(default_factory=DepthConfig)
+    fixes: FixConfig = field(default_factory=FixConfig)
 
     def __post_init__(self) -> None:
         for name, cls in _SUBCONFIGS.items():
@@ -338,4 +382,4 @@ class SimulatorConfig(_Dict):
 
 
 _SUBCONFIGS = {"world": WorldConfig, "trajectory": TrajectoryConfig, "scanner": ScannerConfig,
-               "dvl": DvlConfig, "ahrs": AhrsConfig, "depth": DepthConfig}
+               "dvl": DvlConfig, "ahrs": AhrsConfig, "depth": DepthConfig, "fixes": FixConfig}

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import rotations_from_rpy, wrap_angle
-from .config import AhrsConfig, DepthConfig, DvlConfig, WorldConfig
-from ..dataset import AttitudeLog, DepthLog, DvlLog
+from .config import AhrsConfig, DepthConfig, DvlConfig, FixConfig, WorldConfig
+from ..dataset import AttitudeLog, DepthLog, DvlLog, PositionFixLog
 from .trajectory import Trajectory
 from .world import floor_depth_m, over_slope
 
@@ -125,3 +125,29 @@ def simulate_depth(traj: Trajectory, cfg: DepthConfig, rng: np.random.Generator)
     t = sensor_stamps(cfg.rate_hz, traj.duration_s)
     z = traj.sample(t).position_ned_m[:, 2]
     return DepthLog(t, z + cfg.bias_m + rng.normal(0.0, cfg.noise_m, len(t)))
+
+
+def simulate_fixes(traj: Trajectory, cfg: FixConfig, rng: np.random.Generator) -> PositionFixLog | None:
+    """Surface GPS fixes before the dive (the vehicle above its start point: it then dives straight down) and
+    USBL fixes during it, with the errors and stated covariances of :class:`FixConfig`."""
+    t_parts, p_parts, c_parts, src = [], [], [], []
+    start = traj.sample(np.array([0.0])).position_ned_m[0, 0:2]
+    if cfg.gps_count:
+        t = -cfg.gps_before_start_s - np.arange(cfg.gps_count)[::-1] / cfg.gps_rate_hz
+        bias = rng.normal(0.0, cfg.gps_bias_sigma_m, 2)
+        p = start + bias + rng.normal(0.0, cfg.gps_noise_m, (len(t), 2))
+        var = cfg.gps_bias_sigma_m ** 2 + cfg.gps_noise_m ** 2
+        t_parts.append(t)
+        p_parts.append(p)
+        c_parts.append(np.broadcast_to(np.eye(2) * var, (len(t), 2, 2)))
+        src += ["gps"] * len(t)
+    if cfg.usbl_rate_hz:
+        t = sensor_stamps(cfg.usbl_rate_hz, traj.duration_s)
+        p = traj.sample(t).position_ned_m[:, 0:2] + rng.normal(0.0, cfg.usbl_noise_m, (len(t), 2))
+        t_parts.append(t)
+        p_parts.append(p)
+        c_parts.append(np.broadcast_to(np.eye(2) * cfg.usbl_noise_m ** 2, (len(t), 2, 2)))
+        src += ["usbl"] * len(t)
+    if not t_parts:
+        return None
+    return PositionFixLog(np.concatenate(t_parts), np.concatenate(p_parts), np.concatenate(c_parts), tuple(src))

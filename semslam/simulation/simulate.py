@@ -22,7 +22,7 @@ from .config import SimulatorConfig
 from ..dataset import FORMAT_VERSION, Dataset, ScanRecord, VehicleTruth, vehicle_from_simulator_dict
 from .objects import ObjectModel, builtin_objects
 from .scanner import LaserScanner
-from .sensors import sensor_stamps, simulate_ahrs, simulate_depth, simulate_dvl
+from .sensors import sensor_stamps, simulate_ahrs, simulate_depth, simulate_dvl, simulate_fixes
 from .trajectory import Trajectory
 from .world import World, build_world
 
@@ -31,7 +31,7 @@ MISSION_FORMAT_VERSION = FORMAT_VERSION
 #: Time between scan starts (s); a scan lasts 1 / scan_rate_hz.
 DEFAULT_SCAN_INTERVAL_S = 0.5
 
-_STREAMS = ("world", "trajectory", "dvl", "ahrs", "depth", "scanner")
+_STREAMS = ("world", "trajectory", "dvl", "ahrs", "depth", "scanner", "fixes")
 
 
 def _streams(seed: int) -> dict[str, np.random.Generator]:
@@ -55,7 +55,7 @@ def mission_trajectory(world: World, config: SimulatorConfig, rng: np.random.Gen
 
 def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
                      scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False,
-                     objects: dict | None = None) -> Dataset:
+                     objects: dict | None = None, world_seed: int | None = None) -> Dataset:
     """Simulate a whole mission.
 
     Parameters
@@ -71,6 +71,9 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     objects : dict of str to ObjectModel, optional
         The objects placed in the tank (default: the four built-in fittings), e.g. a user's CAD models from
         :func:`semslam.simulation.cad_models.read_models`; the first four go to the corners of the route.
+    world_seed : int, optional
+        The seed of the world alone (the objects' placement): another dive over the same structure as the mission of
+        that seed, with its own trajectory and sensor noise from ``seed`` (map reuse across dives).
 
     Returns
     -------
@@ -84,6 +87,8 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     seed = _check_seed(seed)
     scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_mission")
     rngs = _streams(seed)
+    if world_seed is not None:
+        rngs["world"] = _streams(_check_seed(world_seed))["world"]
     if objects is None:
         objects = builtin_objects()
     elif not isinstance(objects, dict) or not objects or not all(isinstance(m, ObjectModel) for m in objects.values()):
@@ -94,6 +99,7 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     dvl = simulate_dvl(traj, config.world, config.dvl, rngs["dvl"])
     ahrs = simulate_ahrs(traj, config.ahrs, rngs["ahrs"])
     depth = simulate_depth(traj, config.depth, rngs["depth"])
+    fixes = simulate_fixes(traj, config.fixes, rngs["fixes"]) if config.fixes.any else None
     t_truth = sensor_stamps(config.trajectory.truth_rate_hz, traj.duration_s)
     s = traj.sample(t_truth)
     truth = VehicleTruth(t_truth, s.position_ned_m, s.rpy_rad, s.velocity_body_mps)
@@ -116,8 +122,13 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
         "units": {"length": "m", "angle": "rad", "time": "s", "velocity": "m/s"},
     }
     vehicle = vehicle_from_simulator_dict(sim_dict, scanner.T_vehicle_scanner)
+    origin = None
+    if fixes is not None:
+        from ..geodesy import GeodeticOrigin
+
+        origin = GeodeticOrigin(config.fixes.origin_latitude_deg, config.fixes.origin_longitude_deg, 0.0)
     return Dataset(vehicle, dvl, ahrs, depth, truth, list(world.objects), records, cfg_dict, None, seed,
-                   clouds if with_scans else None)
+                   clouds if with_scans else None, fixes=fixes, geodetic_origin=origin)
 
 
 def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,

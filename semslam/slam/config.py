@@ -23,6 +23,7 @@ from typing import Any
 
 from .._validation import check_choice
 from ..errors import ConfigError, SemslamError
+from ..limits import LIMITS, check as check_limit
 
 #: the filter's modes (see :mod:`semslam.slam.session`)
 MODES = ("dr", "position", "pose", "pose+heading")
@@ -41,6 +42,18 @@ def _check_types(obj) -> None:
             raise ConfigError(f"The {f.name!r} field of {name} must be true or false. Got {v!r} instead.")
         if isinstance(v, float) and not math.isfinite(v):
             raise ConfigError(f"The {f.name!r} field of {name} must be finite. Got {v!r} instead.")
+
+
+def _check_ranges(obj, section: str) -> None:
+    """Every number of a section inside its plausibility range (``semslam.limits.LIMITS["slam.<section>.<key>"]``,
+    ``docs/limits.md``): a rate or step that would make the work unbounded, a noise figure that breaks the filter."""
+    for f in fields(obj):
+        name = f"slam.{section}.{f.name}"
+        if name in LIMITS:
+            v = getattr(obj, f.name)
+            for i, x in enumerate(v if isinstance(v, tuple) else (v,)):
+                idx = f" (element {i})" if isinstance(v, tuple) else ""
+                check_limit(name, x, f"The {f.name!r} field of {type(obj).__name__}{idx}", error=ConfigError)
 
 
 def _positive(obj, *names) -> None:
@@ -98,6 +111,7 @@ class MotionConfig:
                 raise ConfigError(f"The {name!r} field of MotionConfig must be >= 0. Got {vrw!r} instead.")
         _check_types(self)
         _positive(self, "max_predict_dt_s", "unaided_after_s")
+        _check_ranges(self, "motion")
 
 
 @dataclass(frozen=True)
@@ -131,40 +145,45 @@ class GatingConfig:
             raise ConfigError(f"The 'sensor_gate_max_rejections' field of GatingConfig must be >= 0. Got "
                               f"{self.sensor_gate_max_rejections!r} instead.")
         _positive(self, "candidate_radius_m")
+        _check_ranges(self, "gating")
 
 
 @dataclass(frozen=True)
 class InitialisationConfig:
     """The start of the run and the creation of landmarks (consensus of detections, surveyed objects)."""
 
-    #: the launch point defines the world frame (as in the papers, whose ground truth starts at the vehicle's start):
-    #: the filter knows it to this standard deviation per axis (a surveyed mark; 0.01 for a 1 cm fix), and a
-    #: simulated start is drawn from it (``perturb_initial_position``) so that the initial NEES is chi-square
+    #: a dive without position fixes starts a local frame at its start point (north = east = 0), known to this
+    #: standard deviation per axis (see :mod:`semslam.slam.initial`)
     initial_position_sigma_m: float = 0.001
     initial_velocity_sigma_mps: float = 0.05
-    perturb_initial_position: bool = True
+    #: the start's depth and first fix are taken within this time of the first attitude sample (s)
+    start_window_s: float = 2.0
+    #: a position fix older than this at the start is not the start point (s)
+    max_fix_age_s: float = 120.0
+    #: the start's depth without a pressure sample near it (m), and its north/east when the dive has fixes but
+    #: none near the start (the fixes place it as they come)
+    unknown_depth_sigma_m: float = 100.0
+    unknown_position_sigma_m: float = 1000.0
     consensus_position_m: float = 0.3
     consensus_attitude: float = 0.02
     consensus_min_observations: int = 4
     consensus_max_age_s: float = 60.0
     #: variance (rad^2) given to a detection's rotation about an axis its object's symmetry leaves unobservable
     unobservable_var_rad2: float = 0.25
-    surveyed_objects: tuple = ()
+    #: surveyed landmarks (a survey file, an earlier map) without a covariance of their own are known to these
     survey_position_sigma_m: float = 0.01
     survey_rotation_sigma_rad: float = math.radians(0.5)
 
     def __post_init__(self) -> None:
-        if isinstance(self.surveyed_objects, str) or not all(isinstance(n, str) for n in self.surveyed_objects):
-            raise ConfigError(f"The 'surveyed_objects' field of InitialisationConfig must be a sequence of object "
-                              f"names. Got {self.surveyed_objects!r} instead.")
-        object.__setattr__(self, "surveyed_objects", tuple(self.surveyed_objects))
         _check_types(self)
-        _positive(self, "initial_position_sigma_m", "initial_velocity_sigma_mps", "consensus_position_m",
+        _positive(self, "initial_position_sigma_m", "initial_velocity_sigma_mps", "start_window_s", "max_fix_age_s",
+                  "unknown_depth_sigma_m", "unknown_position_sigma_m", "consensus_position_m",
                   "consensus_attitude", "consensus_max_age_s", "unobservable_var_rad2", "survey_position_sigma_m",
                   "survey_rotation_sigma_rad")
         if self.consensus_min_observations < 1:
             raise ConfigError(f"The 'consensus_min_observations' field of InitialisationConfig must be >= 1. Got "
                               f"{self.consensus_min_observations!r} instead.")
+        _check_ranges(self, "initialisation")
 
 
 @dataclass(frozen=True)
@@ -180,6 +199,7 @@ class MapConfig:
         if self.dense_max_landmarks < 0:
             raise ConfigError(f"The 'dense_max_landmarks' field of MapConfig must be >= 0. Got "
                               f"{self.dense_max_landmarks!r} instead.")
+        _check_ranges(self, "map")
 
 
 @dataclass(frozen=True)
@@ -195,6 +215,7 @@ class OutputConfig:
     def __post_init__(self) -> None:
         _check_types(self)
         _positive(self, "history_rate_hz", "smoother_max_mb")
+        _check_ranges(self, "output")
 
 
 _SECTIONS = {"motion": MotionConfig, "gating": GatingConfig, "initialisation": InitialisationConfig,
@@ -258,5 +279,6 @@ class SlamConfig:
             try:
                 kw[name] = scls(**table)
             except SemslamError as exc:  # ConfigError, and InputError from a choice check
-                raise ConfigError(f"{source}: {exc}") from None
+                # the class kept: a plausibility error stays one (semslam.limits)
+                raise (type(exc) if isinstance(exc, ConfigError) else ConfigError)(f"{source}: {exc}") from None
         return cls(**kw)

@@ -348,7 +348,8 @@ class SemanticEkf(CompressedState):
 
     def add_prior_landmarks(self, poses_xyzrpy: np.ndarray, covs: np.ndarray, labels, *, stamp_s: float = 0.0,
                             names=None) -> list[int]:
-        """Add landmarks known a priori (a surveyed map), independent of the vehicle. They start passive."""
+        """Add landmarks known a priori (a surveyed map), independent of the vehicle. They start passive. ``covs``:
+        (m, 6, 6) one covariance per landmark, or (6m, 6m) their joint covariance."""
         if self.recorder is not None:
             self.recorder.before_transition(self)
         self.flush()
@@ -356,9 +357,13 @@ class SemanticEkf(CompressedState):
         m, n = len(poses), self.n
         P = np.zeros((n + 6 * m, n + 6 * m))
         P[:n, :n] = self.P
-        for j in range(m):
-            s = n + 6 * j
-            P[s:s + 6, s:s + 6] = covs[j]
+        covs = np.asarray(covs, dtype=float)
+        if covs.shape == (6 * m, 6 * m):
+            P[n:, n:] = covs
+        else:
+            for j in range(m):
+                s = n + 6 * j
+                P[s:s + 6, s:s + 6] = covs[j]
         self.P = P
         self.x = np.concatenate([self.x, poses.ravel()])
         self._N = None  # a surveyed landmark fixes the heading: nothing left unobservable to protect

@@ -1,5 +1,14 @@
 """Evaluation of a SLAM run against ground truth: a pass over a finished :class:`SlamResult` and the
-dataset's truth (vehicle trajectory, object poses). A run without ground truth is left as it is."""
+dataset's truth (vehicle trajectory, object poses), after the run. A run without ground truth is left as it is.
+
+Frames. A run whose start came from position fixes lives in the world frame: its errors are taken as they are
+(the fix's error is in them), and ``launch_error_m`` says how far the start was off. A run without fixes lives in a
+local frame whose north/east origin is the start point: the truth is expressed in that frame by the one
+translation that puts the true start at the estimated one (the frame's definition, so the NEES stays a test of the
+covariance); ``metrics["evaluation_frame"]`` says which. Every run also gets ``ate_4dof_rmse_m``: the ATE after the
+best yaw + translation alignment (as evo's ``-a`` restricted to the 4 degrees of freedom a vehicle with an AHRS and a
+depth sensor cannot observe).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +16,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..dataset import Dataset
+from ..dataset import Dataset, ObjectTruth
+from ..geometry import RigidTransform
 from ..geometry import rotation_from_rpy
 from ..symmetry import Symmetry
 from . import _ekf_kernels as kern
@@ -50,9 +60,23 @@ def evaluate_run(result: SlamResult, dataset: Dataset, symmetries: dict[str, Sym
     stamps = result.stamps_s
     metrics = dict(result.metrics)
     truth_pos = truth.interpolate_position(stamps) if truth is not None else None
+    objects = list(dataset.objects)
     if truth_pos is not None and len(stamps):
+        frame = (metrics.get("start") or {}).get("frame", "world")
+        offset = np.zeros(3)
+        if frame == "local":
+            offset[0:2] = truth_pos[0, 0:2] - result.position_ned_m[0, 0:2]
+            truth_pos = truth_pos - offset
+            objects = [ObjectTruth(o.name, o.label, RigidTransform.from_rotation_translation(
+                o.T_world_object.rotation, o.T_world_object.translation_m - offset), o.in_database) for o in objects]
+            metrics["evaluation_frame"] = {"frame": "local", "alignment": "translation putting the true start at the "
+                                           "estimated start (the local frame's origin)", "offset_ned_m": offset.tolist()}
+        else:
+            metrics["evaluation_frame"] = {"frame": "world", "alignment": "none"}
         metrics.update(trajectory_metrics(result.position_ned_m, truth_pos, result.position_cov_m2))
-    landmarks = [evaluate_landmark(lm, dataset.objects, symmetries.get(lm.label, Symmetry())) for lm in result.landmarks]
+        metrics["launch_error_m"] = float(np.linalg.norm(result.position_ned_m[0] - truth_pos[0]))
+        metrics["ate_4dof_rmse_m"] = ate_4dof(result.position_ned_m, truth_pos)
+    landmarks = [evaluate_landmark(lm, objects, symmetries.get(lm.label, Symmetry())) for lm in result.landmarks]
     ups = [r for r in result.update_log if r["kind"] == "landmark" and r.get("accepted")]
     byname = {lm.landmark_id: lm.matched_object for lm in landmarks}
     metrics["wrong_object_updates"] = sum(bool(r.get("object_name")) and r["object_name"] != byname.get(r["landmark"])
@@ -72,4 +96,26 @@ def evaluate_run(result: SlamResult, dataset: Dataset, symmetries: dict[str, Sym
         metrics["smoother"] = dict(metrics["smoother"])
         metrics["smoother"].update(trajectory_metrics(result.smoothed_position_ned_m, truth_pos,
                                                       result.smoothed_position_cov_m2))
+        metrics["smoother"]["ate_4dof_rmse_m"] = ate_4dof(result.smoothed_position_ned_m, truth_pos)
     return replace(result, truth_position_ned_m=truth_pos, landmarks=landmarks, metrics=metrics)
+
+
+def align_4dof(est_m: np.ndarray, truth_m: np.ndarray) -> tuple[float, np.ndarray]:
+    """The yaw (rad, about the world z) and translation (m) that best map ``est_m`` (K, 3) onto ``truth_m`` in the
+    least-squares sense: ``truth ~ Rz(yaw) est + t`` (closed form: a 2-D Procrustes on the horizontal components)."""
+    est, tru = np.asarray(est_m, dtype=float), np.asarray(truth_m, dtype=float)
+    me, mt = est.mean(axis=0), tru.mean(axis=0)
+    a, b = est[:, :2] - me[:2], tru[:, :2] - mt[:2]
+    yaw = float(np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])))
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return yaw, mt - R @ me
+
+
+def ate_4dof(est_m: np.ndarray, truth_m: np.ndarray) -> float:
+    """ATE RMSE (m) after :func:`align_4dof`."""
+    yaw, t = align_4dof(est_m, truth_m)
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    d = np.asarray(est_m, dtype=float) @ R.T + t - np.asarray(truth_m, dtype=float)
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))

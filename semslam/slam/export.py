@@ -141,48 +141,58 @@ def _landmark_record(lm: Any) -> dict:
     pose = np.asarray(lm.pose_xyzrpy, dtype=np.float64)
     cov = np.asarray(lm.covariance_6x6, dtype=np.float64)
     R = rotations_from_rpy(pose[3:])[0]
-    return {"landmark_id": int(lm.landmark_id), "label": lm.label, "name": lm.name, "matched_object": lm.matched_object,
+    # the estimate only: the errors against truth live in the run's landmarks.csv and metrics (evaluation), so the
+    # same dive with or without ground truth gives byte-identical maps
+    return {"landmark_id": int(lm.landmark_id), "label": lm.label, "name": lm.name,
             "position_ned_m": pose[:3], "rpy_rad": pose[3:], "quat_wxyz": quat_wxyz_from_rotation(R),
             "covariance_6x6": cov, "first_seen_s": float(lm.first_seen_s), "last_seen_s": float(lm.last_seen_s),
-            "n_updates": int(lm.n_updates), "position_error_m": float(lm.position_error_m),
-            "orientation_error_rad": float(lm.orientation_error_rad)}
+            "n_updates": int(lm.n_updates)}
 
 
 def write_landmarks_json(result: SlamResult, path: str | os.PathLike) -> Path:
     """Write the map as JSON: ``{"format": "semslam-map", "format_version": 1, "frame", "covariance_order",
     "mode", "classes": {label: index}, "landmarks": [...]}``; each landmark has ``landmark_id``, ``label``,
-    ``name``, ``matched_object``, ``position_ned_m``, ``rpy_rad``, ``quat_wxyz``, ``covariance_6x6`` (6 rows of
-    6, order x y z roll pitch yaw), ``first_seen_s``, ``last_seen_s``, ``n_updates`` and the errors against truth
-    (``null`` without truth)."""
+    ``name``, ``position_ned_m``, ``rpy_rad``, ``quat_wxyz``, ``covariance_6x6`` (6 rows of 6, order x y z roll
+    pitch yaw), ``first_seen_s``, ``last_seen_s``, ``n_updates``. ``world_frame``: ``"world"`` (placed by position
+    fixes, local NED about ``geodetic_origin``) or ``"local"`` (the dive's start point): a later dive reuses the map
+    (``--survey``) only in the same world frame. ``joint_covariance`` (6L rows of 6L): the landmarks' joint
+    covariance (landmarks mapped from one trajectory share its errors: a map reused without their correlation
+    would bend the next dive's trajectory). Errors against ground truth are not part of the map (the run's
+    ``landmarks.csv`` has them)."""
     out = _check_file_path(path, "write_landmarks_json")
     _check_result(result, "write_landmarks_json", need_attitude=False)
-    doc = {"format": "semslam-map", "format_version": 1,
+    start = result.metrics.get("start") or {}
+    doc = {"format": "semslam-map", "format_version": 2,
            "frame": "world NED (x north, y east, z down); roll pitch yaw intrinsic Z-Y-X",
+           "world_frame": start.get("frame"), "geodetic_origin": result.metrics.get("geodetic_origin"),
            "covariance_order": list(_AXES), "mode": result.mode, "classes": landmark_class_indices(result),
            "landmarks": [_landmark_record(lm) for lm in result.landmarks]}
+    J = getattr(result, "landmark_joint_covariance", None)
+    if J is not None and np.shape(J) == (6 * len(result.landmarks),) * 2:
+        doc["joint_covariance"] = np.asarray(J, dtype=np.float64)  # (6L, 6L), landmarks in order
     atomic_write_text(out, json.dumps(to_jsonable(doc), indent=2) + "\n")
     return out
 
 
 def write_landmarks_csv(result: SlamResult, path: str | os.PathLike) -> Path:
     """Write the map as CSV, one row per landmark: ids, label, position (NED), rpy, ``qw qx qy qz``, first/last
-    seen, updates, errors against truth (empty without truth) and the full 6x6 covariance row-major as 36 columns
+    seen, updates and the full 6x6 covariance row-major as 36 columns
     ``cov_<a>_<b>`` with a, b in x y z roll pitch yaw (unlike the run directory's ``landmarks.csv``, which keeps
     the upper triangle)."""
     out = _check_file_path(path, "write_landmarks_csv")
     _check_result(result, "write_landmarks_csv", need_attitude=False)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["landmark_id", "label", "name", "matched_object", "x_m", "y_m", "z_m", "roll_rad", "pitch_rad",
-                "yaw_rad", "qw", "qx", "qy", "qz", "first_seen_s", "last_seen_s", "n_updates", "position_error_m",
-                "orientation_error_rad"] + [f"cov_{a}_{b}" for a in _AXES for b in _AXES])
+    w.writerow(["landmark_id", "label", "name", "x_m", "y_m", "z_m", "roll_rad", "pitch_rad",
+                "yaw_rad", "qw", "qx", "qy", "qz", "first_seen_s", "last_seen_s", "n_updates"]
+               + [f"cov_{a}_{b}" for a in _AXES for b in _AXES])
     num = lambda v: f"{v:.17g}" if np.isfinite(v) else ""  # noqa: E731  (17 digits: floats round-trip)
     for lm in result.landmarks:
         r = _landmark_record(lm)
-        w.writerow([r["landmark_id"], r["label"], r["name"], r["matched_object"],
+        w.writerow([r["landmark_id"], r["label"], r["name"],
                     *map(num, r["position_ned_m"]), *map(num, r["rpy_rad"]), *map(num, r["quat_wxyz"]),
-                    num(r["first_seen_s"]), num(r["last_seen_s"]), r["n_updates"], num(r["position_error_m"]),
-                    num(r["orientation_error_rad"]), *map(num, r["covariance_6x6"].reshape(-1))])
+                    num(r["first_seen_s"]), num(r["last_seen_s"]), r["n_updates"],
+                    *map(num, r["covariance_6x6"].reshape(-1))])
     atomic_write_text(out, buf.getvalue())
     return out
 

@@ -60,19 +60,26 @@ class ObjectMapper:
 
     # ------------------------------------------------------------------ surveyed landmarks
     def add_surveyed(self, stamp_s: float, names, labels, T_world_objects, position_sigma_m: float,
-                     rotation_sigma_rad: float) -> None:
-        """Landmarks of surveyed objects (a known reference structure), independent of the vehicle, known to
-        the given standard deviations. They make the absolute heading observable."""
+                     rotation_sigma_rad: float, covariances_6x6=None, joint=None) -> None:
+        """Landmarks of surveyed objects (a known reference structure, an earlier dive's map), independent of the
+        vehicle, each known to its own 6x6 covariance (x, y, z, roll, pitch, yaw) or, where None, to the given
+        standard deviations. They make the absolute heading observable."""
         poses, covs = [], []
-        for T in T_world_objects:
+        given = list(covariances_6x6) if covariances_6x6 is not None else [None] * len(T_world_objects)
+        for T, Cg in zip(T_world_objects, given):
             rpy = rpy_from_rotation(T.rotation)
+            if Cg is not None:
+                poses.append(np.concatenate([T.translation_m, rpy]))
+                covs.append(0.5 * (np.asarray(Cg, dtype=float) + np.asarray(Cg, dtype=float).T))
+                continue
             Einv = kern.world_rate_to_rpy(rpy)
             C = np.zeros((6, 6))
             C[0:3, 0:3] = np.eye(3) * position_sigma_m ** 2
             C[3:6, 3:6] = Einv @ Einv.T * rotation_sigma_rad ** 2
             poses.append(np.concatenate([T.translation_m, rpy]))
             covs.append(0.5 * (C + C.T))
-        self.ekf.add_prior_landmarks(np.array(poses), np.array(covs), list(labels), stamp_s=stamp_s, names=list(names))
+        self.ekf.add_prior_landmarks(np.array(poses), np.array(covs) if joint is None else joint, list(labels),
+                                     stamp_s=stamp_s, names=list(names))
 
     # ------------------------------------------------------------------ detections
     def _ensure_active(self, j: int) -> None:

@@ -69,6 +69,9 @@ class SlamResult:
     #: (K, 3) vehicle roll, pitch, yaw (rad, NED): the AHRS attitude at each epoch, yaw corrected by the estimated
     #: yaw bias (the filter's attitude: an input, not a state, so it has no covariance here)
     attitude_rpy_rad: np.ndarray | None = None
+    #: (6L, 6L) joint covariance of the final map's landmark poses (their cross-covariances: landmarks mapped
+    #: from one trajectory share its errors, e.g. a common GPS offset); None for an old or empty result
+    landmark_joint_covariance: np.ndarray | None = None
 
     @property
     def position_error_m(self) -> np.ndarray | None:

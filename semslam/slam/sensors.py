@@ -99,7 +99,7 @@ class SensorGate:
 
     def __init__(self, cfg: SlamConfig) -> None:
         self.max_rejections = cfg.gating.sensor_gate_max_rejections
-        self.threshold = {d: GateThresholds(cfg.gating.sensor_gate_probability).threshold(d) for d in (1, 3)}
+        self.threshold = {d: GateThresholds(cfg.gating.sensor_gate_probability).threshold(d) for d in (1, 2, 3)}
         self.rejections: dict[str, int] = {}
 
 
@@ -125,6 +125,27 @@ class DepthModel:
             gate.rejections["depth"] = n_rej + 1
         return dict(kind="depth", nis=d2, dof=1, threshold=thr, accepted=bool(ok or forced),
                     **({"reason": "gate_reset"} if forced else {}))
+
+
+class PositionFixModel:
+    """A horizontal position fix (GPS at the surface, USBL) = world north and east, with the fix's own stated
+    covariance. Gated like the other navigation sensors, but never forced through after rejections in a row: a
+    fix that jumps (a multipath GPS, a USBL outlier, a wrong origin) is rejected for as long as it disagrees, and
+    the run's health verdict counts it."""
+
+    def update(self, ekf: SemanticEkf, gate: SensorGate, position_ne_m: np.ndarray, cov_ne_m2: np.ndarray) -> dict:
+        idx = ekf.indices("position")[0:2]
+        nu = np.asarray(position_ne_m, dtype=float) - ekf.position_ned_m[0:2]
+        S = ekf.position_cov_m2[0:2, 0:2] + cov_ne_m2
+        try:
+            d2 = float(nu @ np.linalg.solve(S, nu))
+        except np.linalg.LinAlgError:
+            d2 = float("inf")
+        thr = gate.threshold[2]
+        ok = bool(np.isfinite(d2) and d2 <= thr)
+        if ok:
+            ekf.update(np.asarray(idx), np.eye(2), nu, np.asarray(cov_ne_m2, dtype=float))
+        return dict(kind="fix", nis=d2, dof=2, threshold=thr, accepted=ok)
 
 
 class DvlModel:

@@ -13,7 +13,12 @@ attitude is then held). Pending messages are processed in stamp order (DVL, then
 stamps), so messages of different sensors may arrive interleaved in any order within that delay; each sensor's
 own stamps must not decrease, and a message older than what the filter already processed raises
 :class:`~semslam.errors.SlamError` (it would otherwise be silently applied at the wrong time). Equal stamps are
-processed in arrival order. DVL and depth samples before the session's start stamp are ignored.
+processed in arrival order. DVL and depth samples before the session's start stamp are ignored. The filter
+predicts through every gap of the attitude: an attitude stamp more than ``LIMITS["stamps.attitude_gap_s"]``
+(:mod:`semslam.limits`, one hour) after the previous one, or after the start, raises :class:`SlamError`, as does
+a run whose span would need more than ``stamps.history_epochs`` history epochs or ``stamps.predict_steps``
+prediction steps at its settings. DVL velocities and depths outside ``nav.*`` are skipped and counted
+(``metrics["skipped_implausible"]``).
 
 History. The state is recorded every ``1 / history_rate_hz`` s from the start (the epochs of the result and of
 the RTS smoother).
@@ -32,16 +37,17 @@ from ..dataset import VehicleDescription
 from ..detection import Detection
 from ..errors import SlamError
 from ..geometry import RigidTransform, rotation_from_rpy
+from ..limits import LIMITS, check as check_limit
 from ..symmetry import Symmetry
 from .config import MODES, SlamConfig
 from .ekf import SemanticEkf
 from .mapping import ObjectMapper
 from .metrics import nis_summary
 from .results import LandmarkEstimate, SlamEstimate, SlamResult
-from .sensors import AttitudeInput, DepthModel, DvlModel, SensorGate
+from .sensors import AttitudeInput, DepthModel, DvlModel, PositionFixModel, SensorGate
 from .smoother import RtsRecorder
 
-_ORDER = {"dvl": 1, "depth": 2, "detections": 3}
+_ORDER = {"dvl": 1, "depth": 2, "fix": 3, "detections": 4}
 #: at finish, a message later than the last attitude sample by more than this is skipped (counted in the metrics)
 MAX_ATTITUDE_EXTRAPOLATION_S = 1.0
 
@@ -60,9 +66,16 @@ class SlamSession:
     start_stamp_s : float, optional
         Start of the run (the first epoch). Default: the stamp of the first message.
     initial_position_ned_m, initial_velocity_body_mps : array-like of shape (3,)
-        The launch point (it defines the world frame; known to ``config.initialisation.initial_position_sigma_m``)
-        and the initial body velocity (known to ``initial_velocity_sigma_mps``). ``initial_velocity_body_mps=None``:
-        not known (no DVL at the start): zero, known to ``config.motion.unknown_velocity_sigma_mps``.
+        The start point and the initial body velocity (known to ``initial_velocity_sigma_mps``).
+        ``initial_velocity_body_mps=None``: not known (no DVL at the start): zero, known to
+        ``config.motion.unknown_velocity_sigma_mps``. :func:`semslam.slam.initial.initial_state` derives both from
+        the dive's own data (depth sensor, position fixes, DVL).
+    initial_position_cov_m2 : array-like of shape (3, 3), optional
+        The start point's covariance. Default: ``config.initialisation.initial_position_sigma_m`` squared per axis
+        (a start point that defines a local frame).
+    start : InitialState, optional
+        The start found from the dive's own data (:func:`semslam.slam.initial.initial_state`): replaces the four
+        arguments above, and the depth sample and fix it was taken from are not applied again when they arrive.
 
     While no DVL sample has been accepted for ``config.motion.unaided_after_s`` (an outage, a dive without DVL),
     the prediction uses the unaided process noise ``config.motion.unaided_velocity_rw_mps_per_sqrt_s``.
@@ -70,7 +83,8 @@ class SlamSession:
 
     def __init__(self, vehicle: VehicleDescription, *, mode: str = "pose", config: SlamConfig | None = None,
                  symmetries: dict[str, Symmetry] | None = None, start_stamp_s: float | None = None,
-                 initial_position_ned_m: Any = (0.0, 0.0, 0.0), initial_velocity_body_mps: Any = (0.0, 0.0, 0.0)) -> None:
+                 initial_position_ned_m: Any = (0.0, 0.0, 0.0), initial_velocity_body_mps: Any = (0.0, 0.0, 0.0),
+                 initial_position_cov_m2: Any = None, start: Any = None) -> None:
         check_choice("mode", mode, MODES, caller="SlamSession")
         if not isinstance(vehicle, VehicleDescription):
             raise SlamError(f"The 'vehicle' argument of SlamSession must be a VehicleDescription. Got "
@@ -79,8 +93,26 @@ class SlamSession:
         if not isinstance(cfg, SlamConfig):
             raise SlamError(f"The 'config' argument of SlamSession must be a SlamConfig. Got {type(cfg).__name__} instead.")
         self.vehicle, self.cfg, self.mode = vehicle, cfg, mode
+        self._used: dict = {}
+        if start is not None:
+            from .initial import InitialState
+
+            if not isinstance(start, InitialState):
+                raise SlamError(f"The 'start' argument of SlamSession must be an InitialState. Got "
+                                f"{type(start).__name__} instead.")
+            start_stamp_s, initial_position_ned_m = start.start_stamp_s, start.position_ned_m
+            initial_velocity_body_mps, initial_position_cov_m2 = start.velocity_body_mps, start.position_cov_m2
+            self._used = dict(start.used_stamps_s)
         self.symmetries = dict(symmetries or {})
         self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
+        self._P0p = None
+        if initial_position_cov_m2 is not None:
+            P = as_float_array("initial_position_cov_m2", initial_position_cov_m2, (3, 3), caller="SlamSession",
+                               error=SlamError)
+            if not np.allclose(P, P.T) or np.linalg.eigvalsh(0.5 * (P + P.T)).min() <= 0:
+                raise SlamError("The 'initial_position_cov_m2' argument of SlamSession must be symmetric positive "
+                                f"definite. Got {P.tolist()} instead.")
+            self._P0p = 0.5 * (P + P.T)
         self._v_known = initial_velocity_body_mps is not None
         self._v0 = np.zeros(3) if not self._v_known else as_float_array(
             "initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession", error=SlamError)
@@ -96,6 +128,7 @@ class SlamSession:
         self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.motion.propagate_attitude_noise)
         self.dvl = DvlModel(vehicle, cfg.motion.dvl_use_beam_ranges)
         self.depth = DepthModel(vehicle)
+        self.fix = PositionFixModel()
         self.gate = SensorGate(cfg)
         self.log: list[dict] = []
         self.ekf: SemanticEkf | None = None
@@ -105,10 +138,13 @@ class SlamSession:
         self._processed_s = -math.inf
         self._t_end = -math.inf
         self._surveyed: list = []
+        self._joint = None
         self._H: dict[str, list] = {k: [] for k in ("t", "p", "Pp", "v", "Pv", "b", "bv", "c", "rpy")}
         self._next_hist = 0
         self._finished = False
         self._before_start = 0  #: DVL and depth samples before the start stamp (ignored, counted)
+        #: DVL and depth samples outside their plausibility range (semslam.limits; skipped, counted)
+        self._implausible = {"dvl": 0, "depth": 0}
 
     # ------------------------------------------------------------------ set-up
     def _start(self, stamp_s: float) -> None:
@@ -129,7 +165,10 @@ class SlamSession:
                                                                           max(d.misalignment_sigma_rad, 1e-6) ** 2]
         if heading:
             var0 += [cfg.motion.yaw_bias_sigma_rad ** 2]
-        ekf = self._make_filter(self._p0, self._v0, np.diag(var0), yaw_bias=heading, dvl_calibration=calib,
+        P0 = np.diag(var0)
+        if self._P0p is not None:
+            P0[0:3, 0:3] = self._P0p
+        ekf = self._make_filter(self._p0, self._v0, P0, yaw_bias=heading, dvl_calibration=calib,
                                 dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
                                 dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps,
                                 dvl_slope_bias_tau_s=d.degraded_bias_tau_s)
@@ -140,9 +179,9 @@ class SlamSession:
         self._filter_ready(ekf)
         self.mapper = self._make_mapper(ekf)
         if self._surveyed:
-            names, labels, poses = zip(*self._surveyed)
+            names, labels, poses, covs = zip(*self._surveyed)
             self.mapper.add_surveyed(self._t0, names, labels, poses, cfg.initialisation.survey_position_sigma_m,
-                                     cfg.initialisation.survey_rotation_sigma_rad)
+                                     cfg.initialisation.survey_rotation_sigma_rad, covs, joint=self._joint)
 
     # Factory hooks of :meth:`_start`: a backend subclass (the factor graph's
     # :class:`~semslam.slam.graph.GraphSession`) replaces the filter, the smoother's recorder and the mapper here.
@@ -164,15 +203,39 @@ class SlamSession:
         """The object mapper (gating, association, consensus initialisation) over ``ekf``."""
         return ObjectMapper(ekf, self.cfg, self.mode, self.symmetries, self.vehicle.T_vehicle_scanner, self._log)
 
-    def add_surveyed_landmarks(self, names, labels, T_world_objects) -> None:
-        """Landmarks known a priori (a surveyed structure), to ``config.initialisation.survey_position_sigma_m`` and
-        ``survey_rotation_sigma_rad``; before the first message only."""
+    def add_surveyed_landmarks(self, names, labels, T_world_objects, covariances_6x6=None,
+                               joint_covariance=None) -> None:
+        """Landmarks known a priori (a surveyed structure, an earlier dive's map), each with its 6x6 covariance
+        (x, y, z, roll, pitch, yaw) or, without, known to ``config.initialisation.survey_position_sigma_m`` and
+        ``survey_rotation_sigma_rad``; before the first message only. ``joint_covariance`` (6L, 6L): the landmarks'
+        joint covariance (an earlier dive's map, whose landmarks share that dive's errors); it replaces the
+        per-landmark ones (the EKF keeps it whole; the graph backends use its diagonal blocks)."""
         if self.ekf is not None:
             raise SlamError("SlamSession.add_surveyed_landmarks must be called before the first message.")
+        if joint_covariance is not None:
+            J = as_float_array("joint_covariance", joint_covariance, (6 * len(list(names)), 6 * len(list(names))),
+                               caller="SlamSession.add_surveyed_landmarks", error=SlamError)
+            J = 0.5 * (J + J.T)
+            if self._surveyed or np.linalg.eigvalsh(J).min() <= 0:
+                raise SlamError("The joint covariance of the surveyed landmarks must be positive definite, and given "
+                                "in a single call.")
+            self._joint = J
+            covariances_6x6 = [J[6 * k:6 * k + 6, 6 * k:6 * k + 6] for k in range(len(list(names)))]
         names, labels, poses = list(names), list(labels), list(T_world_objects)
         if not (len(names) == len(labels) == len(poses)) or not all(isinstance(T, RigidTransform) for T in poses):
             raise SlamError("SlamSession.add_surveyed_landmarks needs as many names, labels and RigidTransform poses.")
-        self._surveyed += list(zip(names, labels, poses))
+        covs = [None] * len(poses) if covariances_6x6 is None else list(covariances_6x6)
+        if len(covs) != len(poses):
+            raise SlamError("SlamSession.add_surveyed_landmarks needs as many covariances as poses.")
+        for k, C in enumerate(covs):
+            if C is not None:
+                C = as_float_array("covariances_6x6", C, (6, 6), caller="SlamSession.add_surveyed_landmarks",
+                                   error=SlamError)
+                if not np.allclose(C, C.T, atol=1e-12) or np.linalg.eigvalsh(0.5 * (C + C.T)).min() <= 0:
+                    raise SlamError(f"The covariance of surveyed landmark {names[k]!r} must be symmetric positive "
+                                    "definite.")
+                covs[k] = 0.5 * (C + C.T)
+        self._surveyed += list(zip(names, labels, poses, covs))
 
     # ------------------------------------------------------------------ messages
     def _stamp(self, stream: str, stamp_s: Any) -> float:
@@ -190,6 +253,20 @@ class SlamSession:
         if t < self._processed_s:
             raise SlamError(f"A {stream} message stamped {t!r} arrived after the filter had processed up to "
                             f"{self._processed_s!r}: messages may not arrive later than the attitude that covers them.")
+        prev = self._last_stamp.get("attitude", self._t0) if stream == "attitude" else None
+        if prev is not None and t - prev > LIMITS["stamps.attitude_gap_s"].hi:
+            # the filter predicts (and records history) through the gap: one stamp at 2^31 s was a hang
+            check_limit("stamps.attitude_gap_s", t - prev, f"The gap before the attitude stamp {t!r} s (after {prev!r} "
+                        "s; a corrupt stamp?)", error=SlamError)
+        span = t - self._t0 if stream == "attitude" and self._t0 is not None else 0.0
+        if span > 0:  # the whole run's work and memory, from its settings
+            out = self.cfg.output.history_rate_hz
+            check_limit("stamps.history_epochs", span * out, f"The history epochs up to the attitude stamp {t!r} s "
+                        f"({span:g} s after the start at history_rate_hz = {out:g}; lower it or split the dive)",
+                        error=SlamError)
+            check_limit("stamps.predict_steps", span / self.cfg.motion.max_predict_dt_s, "The prediction steps up to "
+                        f"the attitude stamp {t!r} s ({span:g} s after the start at max_predict_dt_s = "
+                        f"{self.cfg.motion.max_predict_dt_s:g}; raise it or split the dive)", error=SlamError)
         self._last_stamp[stream] = t
         if self.ekf is None:
             self._start(t)
@@ -216,7 +293,9 @@ class SlamSession:
         r = None if beam_range_m is None else as_float_array("beam_range_m", beam_range_m, (None,),
                                                              caller="SlamSession.add_dvl", error=SlamError, finite=False)
         self._t_end = max(self._t_end, t)
-        if t >= self._t0:
+        if valid and not all(LIMITS["nav.dvl_velocity_mps"].contains(float(x)) for x in v):
+            self._implausible["dvl"] += 1  # a corrupt record: after 5 in a row the sensor gate would accept them
+        elif t >= self._t0:
             self._push(t, "dvl", (bool(valid), v, r))
         else:
             self._before_start += 1
@@ -226,8 +305,33 @@ class SlamSession:
         t = self._stamp("depth", stamp_s)
         z = as_float_array("depth_m", [depth_m], (1,), caller="SlamSession.add_depth", error=SlamError)[0]
         self._t_end = max(self._t_end, t)
-        if t >= self._t0:
+        if not LIMITS["nav.depth_m"].contains(float(z)):
+            self._implausible["depth"] += 1
+        elif self._used.get("depth") == t:  # the start's own depth sample: not a second measurement
+            del self._used["depth"]
+        elif t >= self._t0:
             self._push(t, "depth", z)
+        else:
+            self._before_start += 1
+
+    def add_position_fix(self, stamp_s: float, position_ne_m: Any, covariance_ne_m2: Any) -> None:
+        """A horizontal position fix (GPS, USBL): north, east (m) in the world frame and its 2x2 covariance (m^2).
+        Gated (see :class:`~semslam.slam.sensors.PositionFixModel`); a fix with a NaN or a covariance that is not
+        positive definite is skipped and counted."""
+        t = self._stamp("fix", stamp_s)
+        p = as_float_array("position_ne_m", position_ne_m, (2,), caller="SlamSession.add_position_fix",
+                           error=SlamError, finite=False)
+        C = as_float_array("covariance_ne_m2", covariance_ne_m2, (2, 2), caller="SlamSession.add_position_fix",
+                           error=SlamError, finite=False)
+        self._t_end = max(self._t_end, t)
+        usable = bool(np.isfinite(p).all() and np.isfinite(C).all() and abs(C[0, 1] - C[1, 0]) <= 1e-9 * abs(C).max()
+                      and C[0, 0] > 0 and np.linalg.det(C) > 0)
+        if not usable:
+            self._log(stamp_s=t, kind="fix_unusable", accepted=False)
+        elif self._used.get("fix") == t:  # the fix the start was taken from
+            del self._used["fix"]
+        elif t >= self._t0:
+            self._push(t, "fix", (p, 0.5 * (C + C.T)))
         else:
             self._before_start += 1
 
@@ -264,6 +368,8 @@ class SlamSession:
                 self._update_dvl(t, *payload)
             elif kind == "depth":
                 self._log(stamp_s=t, **self.depth.update(self.ekf, self.gate, payload))
+            elif kind == "fix":
+                self._log(stamp_s=t, **self.fix.update(self.ekf, self.gate, *payload))
             else:
                 rpy, f = self.attitude.at(t)
                 self.mapper.process(t, payload, rotation_from_rpy(*rpy), self.attitude.cov_world(rpy, f))
@@ -379,8 +485,15 @@ class SlamSession:
         metrics["dvl_degraded"] = sum(r["kind"] == "dvl" and r.get("reason") == "degraded" for r in log)
         metrics["dvl_maneuver_resets"] = sum(r["kind"] == "dvl" and r.get("reason") == "maneuver" for r in log)
         metrics["dvl_dropouts"] = sum(r["kind"] == "dvl_dropout" for r in log)
+        metrics["depth_rejected"] = sum(r["kind"] == "depth" and not r["accepted"] for r in log)
+        metrics["depth_updates"] = sum(r["kind"] == "depth" for r in log)
+        metrics["dvl_updates"] = sum(r["kind"] == "dvl" for r in log)
+        metrics["fix_updates"] = sum(r["kind"] == "fix" for r in log)
+        metrics["fix_rejected"] = sum(r["kind"] == "fix" and not r["accepted"] for r in log)
+        metrics["fix_unusable"] = sum(r["kind"] == "fix_unusable" for r in log)
         metrics["skipped_beyond_attitude"] = sum(r["kind"].endswith("_beyond_attitude") for r in log)
         metrics["skipped_before_start"] = self._before_start
+        metrics["skipped_implausible"] = dict(self._implausible)
         sm = None
         if ekf.recorder is not None:
             sm = ekf.recorder.smooth(ekf)
@@ -394,4 +507,13 @@ class SlamSession:
                           np.asarray(H["bv"]) if ekf.yaw_bias else None,
                           None if sm is None else sm.x[:, 0:3].copy(),
                           None if sm is None else sm.P[:, 0:3, 0:3].copy(),
-                          None if sm is None else sm.x[:, 3:6].copy(), np.asarray(H["rpy"]).reshape(-1, 3))
+                          None if sm is None else sm.x[:, 3:6].copy(), np.asarray(H["rpy"]).reshape(-1, 3),
+                          self._joint_landmark_cov())
+
+    def _joint_landmark_cov(self) -> np.ndarray | None:
+        ekf = self.ekf
+        if not ekf.landmarks:
+            return None
+        idx = np.concatenate([lm.offset + np.arange(6) for lm in ekf.landmarks])
+        C = ekf.cov(idx)
+        return 0.5 * (C + C.T)

@@ -82,6 +82,9 @@ class FrontEkf(SemanticEkf):
     def add_prior_landmarks(self, poses_xyzrpy, covs, labels, *, stamp_s=0.0, names=None):
         ids = super().add_prior_landmarks(poses_xyzrpy, covs, labels, stamp_s=stamp_s, names=names)
         poses = np.asarray(poses_xyzrpy, dtype=float).reshape(-1, 6)
+        covs = np.asarray(covs, dtype=float)
+        if covs.ndim == 2:  # a joint covariance: the graph's priors take its diagonal blocks
+            covs = np.array([covs[6 * k:6 * k + 6, 6 * k:6 * k + 6] for k in range(len(poses))])
         for j, pose, C in zip(ids, poses, covs):
             kl = self.backend.new_landmark(pose)
             self.backend.add_factor(fac.prior_factor(kl, pose, C, f"surveyed landmark {j}", angles=slice(3, 6)))

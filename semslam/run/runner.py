@@ -1,0 +1,307 @@
+"""The one streaming runner: a dive's messages in, one SLAM session per mode (all modes in one pass, EKF or graph
+backend), every scan through the recogniser on the way, and the run's results out.
+
+Time. Messages come in stamp order (a source's promise; one that comes later than what was already processed is
+counted and dropped, never applied at the wrong time). The start waits for the first attitude sample and
+``start_window_s`` of data after it (:mod:`semslam.slam.initial`: depth, fixes, velocity from the dive's own
+data). A scan's detections are stamped by their points, up to a scan's span before the scan message: navigation
+messages wait in a delay line of ``hold_s`` (at least twice the longest scan seen) so that the detections enter the
+filter in stamp order with them. The estimate therefore lags the newest message by ``hold_s``; the live node
+publishes the filter's prediction to the newest attitude.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ..detection import Detection
+from ..errors import InputError
+from ..slam import MODES, SlamConfig, SlamResult
+from ..slam.initial import InitialState, initial_state
+from ..slam.runner import BACKENDS, make_session, with_start
+from .messages import ORDER, Scan
+
+#: the shortest delay line (s); it grows to twice the longest scan span seen
+MIN_HOLD_S = 2.0
+#: attitude samples kept for the scans' up direction (s)
+ATTITUDE_MEMORY_S = 5.0
+
+
+@dataclass
+class RunOutcome:
+    """What a run produced: per mode its :class:`SlamResult`, the detections kept for SLAM per scan, per-scan
+    statistics, the start, and the runner's counts (messages per kind, late or unusable ones)."""
+
+    results: dict[str, SlamResult]
+    detections_by_scan: dict[int, list[Detection]]
+    scans: list[dict]
+    start: InitialState | None
+    counts: dict = field(default_factory=dict)
+
+    def detection_summary(self) -> dict:
+        from ..pipeline.mission import detection_summary
+
+        return detection_summary(self.scans, sum(len(v) for v in self.detections_by_scan.values()))
+
+
+class Runner:
+    """Feed it a dive's messages (:meth:`feed`), then :meth:`finish`.
+
+    Parameters
+    ----------
+    vehicle : VehicleDescription
+    modes : sequence of {"dr", "position", "pose", "pose+heading"}
+    recognizer : ScanRecognizer, optional
+        Recognises every scan (None: scans are skipped, counted; give ``detections_by_scan`` instead).
+    detections_by_scan : dict, optional
+        Detections already made (``{scan_id: [Detection]}``: a detections file, the simulator's truth-based
+        ones), fed at their stamps.
+    config : SlamConfig, optional
+    symmetries : dict, optional
+    backend : {"ekf", "isam2", "batch"}
+    survey : Survey, optional
+        Landmarks known before the run (a survey file, an earlier map).
+    seed : int
+        Scan ``k`` is recognised with seed ``seed * 100003 + k``.
+    keep_unreliable, up_from_attitude : bool
+        As :func:`semslam.pipeline.detect_mission`.
+    on_scan : callable, optional
+        ``on_scan(scan_message, kept_detections, stats, result)`` after each recognised scan.
+    """
+
+    def __init__(self, vehicle, *, modes=("pose",), recognizer=None, detections_by_scan=None,
+                 config: SlamConfig | None = None, symmetries=None, backend: str = "ekf", huber_k=None, survey=None,
+                 seed: int = 0, keep_unreliable: bool = False, up_from_attitude: bool = False,
+                 on_scan: Callable | None = None) -> None:
+        modes = tuple(modes)
+        if not modes or any(m not in MODES for m in modes):
+            raise InputError(f"The 'modes' of a run must be some of {MODES}. Got {modes!r} instead.")
+        if backend not in BACKENDS:
+            raise InputError(f"The 'backend' of a run must be one of {BACKENDS}. Got {backend!r} instead.")
+        self.vehicle, self.modes, self.recognizer = vehicle, modes, recognizer
+        self.given = None if detections_by_scan is None else dict(detections_by_scan)
+        self.cfg = SlamConfig() if config is None else config
+        self.symmetries, self.backend, self.huber_k, self.survey = symmetries, backend, huber_k, survey
+        self.seed, self.keep_unreliable, self.up_from_attitude = seed, keep_unreliable, up_from_attitude
+        self.on_scan = on_scan
+        self.sessions: dict = {}
+        self.start: InitialState | None = None
+        self.detections_by_scan: dict[int, list[Detection]] = {}
+        self.scans: list[dict] = []
+        self.counts: dict = {"late_dropped": {}, "scans_not_recognised": 0}
+        self._boot: list = []       # messages before the start is known
+        self._t_first_att: float | None = None
+        self._heap: list = []
+        self._seq = 0
+        self._newest = -math.inf
+        self._released = -math.inf
+        self._hold = MIN_HOLD_S
+        self._att: list = []        # recent attitude samples (stamp, rpy) for the scans' up
+        self._finished = False
+        self._blas = None
+        if self.given is not None and recognizer is None:  # known in advance: fed at their stamps, scans unused
+            for sid, dets in self.given.items():
+                self._detections(sid, dets)
+
+    # ------------------------------------------------------------------ input
+    def feed(self, msg) -> None:
+        """One message of :mod:`semslam.run.messages` (in stamp order)."""
+        if self._finished:
+            raise InputError("The run is finished: no more messages.")
+        t = float(msg.stamp_s)
+        if not math.isfinite(t):
+            self._count_late(msg.kind, "non_finite_stamp")
+            return
+        if t < self._released:
+            self._count_late(msg.kind)
+            return
+        self._newest = max(self._newest, t)
+        if msg.kind == "attitude":
+            self._att.append((t, msg.rpy_rad))
+            while self._att and self._att[0][0] < t - ATTITUDE_MEMORY_S:
+                self._att.pop(0)
+        if msg.kind == "scan":
+            self._scan(msg)
+            return
+        self._push(t, msg.kind, msg)
+        if self.start is None:
+            self._try_start(final=False)
+        if self.start is not None:
+            self._release(final=False)
+
+    def _count_late(self, kind: str, key: str = "late_dropped") -> None:
+        d = self.counts.setdefault(key, {})
+        d[kind] = d.get(kind, 0) + 1
+
+    def _push(self, t: float, kind: str, payload) -> None:
+        heapq.heappush(self._heap, (t, ORDER[kind], self._seq, kind, payload))
+        self._seq += 1
+        if kind == "attitude" and self._t_first_att is None:
+            self._t_first_att = t
+
+    # ------------------------------------------------------------------ scans
+    def _scan(self, msg: Scan) -> None:
+        self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s))
+        if self.recognizer is None and self.given is not None:
+            return
+        if self.recognizer is None:
+            self.counts["scans_not_recognised"] += 1
+            return
+        else:
+            from ..pipeline.mission import detect_scan, up_from_attitude_samples
+
+            up = None
+            if self.up_from_attitude and self._att:
+                ts, rpy = zip(*self._att)
+                up = up_from_attitude_samples(np.array(ts), np.array(rpy), self.vehicle.scanner.T_vehicle_scanner,
+                                              0.5 * (msg.start_stamp_s + msg.end_stamp_s))
+            dets, stats, result = detect_scan(self.recognizer, msg.cloud, scan_id=msg.scan_id,
+                                              start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
+                                              point_stamps_s=msg.point_stamps_s, seed=self.seed,
+                                              keep_unreliable=self.keep_unreliable, up_scanner=up)
+            self.scans.append(stats)
+            if self.on_scan is not None:
+                self.on_scan(msg, dets, stats, result)
+        self._detections(msg.scan_id, dets)
+
+    def add_scan_detections(self, scan_id: int, detections: list[Detection], stats: dict | None = None) -> None:
+        """Detections of a scan recognised elsewhere (the live node's worker thread): fed at their stamps; those
+        older than what the filter already processed are counted (``late_dropped["detections"]``) and dropped."""
+        if stats is not None:
+            self.scans.append(stats)
+        self._detections(scan_id, list(detections))
+        if self.start is not None:
+            self._release(final=False)
+
+    def estimate(self, mode: str):
+        """The current :class:`~semslam.slam.SlamEstimate` of ``mode`` (None before the start): the filter at the
+        last released message, ``hold_s`` behind the newest one."""
+        s = self.sessions.get(mode)
+        return None if s is None or s.ekf is None else s.estimate()
+
+    @property
+    def hold_s(self) -> float:
+        return self._hold
+
+    def _detections(self, scan_id: int, dets: list[Detection]) -> None:
+        if not dets:
+            return
+        self.detections_by_scan[scan_id] = list(dets)
+        groups: dict = {}
+        for d in dets:
+            st = float(d.stamp_s)
+            if not math.isfinite(st):
+                raise InputError(f"Every detection needs a finite 'stamp_s'. Got {d.stamp_s!r} in scan {scan_id}.")
+            groups.setdefault(st, []).append(d)
+        for st, group in groups.items():
+            if st < self._released:
+                self._count_late("detections")
+                continue
+            self._push(st, "detections", group)
+
+    # ------------------------------------------------------------------ start and release
+    def _try_start(self, final: bool) -> None:
+        t0 = self._t_first_att
+        if t0 is None:
+            return
+        window = self.cfg.initialisation.start_window_s
+        if not final and self._newest < t0 + window:
+            return
+        items = sorted(self._heap)
+        dep = [(t, p.depth_m) for t, _, _, k, p in items if k == "depth"]
+        fix = [(t, p) for t, _, _, k, p in items if k == "fix"]
+        fix = [(t, p) for t, p in fix if np.isfinite(p.position_ne_m).all() and _usable_cov(p.covariance_ne_m2)]
+        dvl = [(t, p) for t, _, _, k, p in items if k == "dvl"]
+        self.start = initial_state(
+            t0, depth_stamps_s=[t for t, _ in dep], depth_m=[z for _, z in dep],
+            depth_noise_m=self.vehicle.depth.noise_m, fix_stamps_s=[t for t, _ in fix],
+            fix_positions_ne_m=[p.position_ne_m for _, p in fix], fix_covariances_ne_m2=[p.covariance_ne_m2 for _, p in fix],
+            dvl_stamps_s=[t for t, _ in dvl], dvl_velocities_mps=[p.velocity_mps for _, p in dvl],
+            dvl_valid=[p.valid for _, p in dvl], config=self.cfg)
+        for mode in self.modes:
+            s = make_session(self.vehicle, self.start, mode=mode, config=self.cfg, symmetries=self.symmetries,
+                             backend=self.backend, huber_k=self.huber_k)
+            if self.survey is not None:
+                self.survey.add_to(s)
+            self.sessions[mode] = s
+
+    def _release(self, final: bool) -> None:
+        limit = math.inf if final else self._newest - self._hold
+        if not self._heap or self._heap[0][0] > limit:
+            return
+        if self._blas is None:  # the filter's matrices are small: BLAS threads only spin on them (6x slower, measured)
+            self._blas = threadpool_limits(limits=1, user_api="blas")
+        while self._heap and self._heap[0][0] <= limit:
+            t, _, _, kind, p = heapq.heappop(self._heap)
+            self._released = t
+            for mode, s in self.sessions.items():
+                _feed(s, mode, kind, t, p)
+
+    # ------------------------------------------------------------------ output
+    def finish(self, truth=None) -> RunOutcome:
+        """Process what is pending and return the :class:`RunOutcome`; with ``truth`` (a dataset holding the dive's
+        ground truth), each result is evaluated against it (after the run: the estimate never sees it)."""
+        if self._finished:
+            raise InputError("Runner.finish was already called.")
+        self._finished = True
+        if self.start is None:
+            self._try_start(final=True)
+        if self.start is None:
+            raise InputError("The dive has no attitude sample: the filter needs the attitude as input.")
+        try:
+            self._release(final=True)
+            results = {}
+            with threadpool_limits(limits=1, user_api="blas"):
+                for mode, s in self.sessions.items():
+                    r = with_start(s.finish(), self.start)
+                    if truth is not None:
+                        from ..slam.evaluation import evaluate_run
+
+                        r = evaluate_run(r, truth, self.symmetries)
+                    results[mode] = r
+        finally:
+            if self._blas is not None:
+                self._blas.restore_original_limits()
+                self._blas = None
+        return RunOutcome(results, self.detections_by_scan, self.scans, self.start, self.counts)
+
+
+def _usable_cov(C) -> bool:
+    C = np.asarray(C, dtype=float)
+    return bool(C.shape == (2, 2) and np.isfinite(C).all() and C[0, 0] > 0 and np.linalg.det(C) > 0
+                and abs(C[0, 1] - C[1, 0]) <= 1e-9 * abs(C).max())
+
+
+def _feed(session, mode: str, kind: str, t: float, p) -> None:
+    if kind == "attitude":
+        session.add_attitude(t, p.rpy_rad)
+    elif kind == "dvl":
+        session.add_dvl(t, p.velocity_mps, valid=p.valid, beam_range_m=p.beam_range_m)
+    elif kind == "depth":
+        session.add_depth(t, p.depth_m)
+    elif kind == "fix":
+        session.add_position_fix(t, p.position_ne_m, p.covariance_ne_m2)
+    elif mode != "dr":
+        session.add_detections(t, p)
+
+
+def run_stream(dive, *, truth: Any = "auto", **runner_kw) -> RunOutcome:
+    """Every message of an opened dive (:func:`semslam.run.open_dive`) through a :class:`Runner`; evaluated
+    against the dive's ground truth when it has one (``truth="auto"``) or the given dataset."""
+    runner = Runner(dive.vehicle, **runner_kw)
+    for msg in dive.messages():
+        runner.feed(msg)
+    if truth == "auto":
+        truth = dive.ground_truth()
+    out = runner.finish(truth=truth)
+    out.counts["source"] = dict(dive.counts)
+    if dive.geodetic_origin is not None:
+        for r in out.results.values():
+            r.metrics["geodetic_origin"] = dive.geodetic_origin.as_dict()
+    return out
