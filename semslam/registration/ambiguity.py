@@ -28,7 +28,7 @@ from ..geometry import RigidTransform
 from .icp import align_icp
 from .result import inlier_statistics
 
-__all__ = ["FITNESS_RATIO", "MIN_FITNESS", "RMSE_RATIO", "flip_check"]
+__all__ = ["FITNESS_RATIO", "MIN_FITNESS", "RMSE_RATIO", "flip_check", "half_turns"]
 
 #: a turned answer with at least this share of the answer's fitness ...
 FITNESS_RATIO = 0.8
@@ -68,3 +68,23 @@ def flip_check(source: np.ndarray, target: np.ndarray, T_target_source: np.ndarr
                     and a["rmse_m"] <= RMSE_RATIO * best["rmse_m"] for a in alts)
     return {**best, "ambiguous": bool(ambiguous),
             "alternatives": [{k: v for k, v in a.items() if k != "T"} for a in alts]}
+
+
+def half_turns(T_target_source: np.ndarray, source: np.ndarray) -> list[np.ndarray]:
+    """The three half-turned variants of ``T_target_source`` (4x4): the aligned source turned by pi about each of
+    its principal axes through its centroid, in the target frame. The pose search refines and scores them with
+    its own hypotheses, so that a near-equal flip the search did not keep is compared (and, when it scores within
+    the margin, flags the pose ambiguous and widens its covariance) instead of leaving a confident wrong pose."""
+    T = np.asarray(T_target_source, dtype=float)
+    p = np.asarray(source, dtype=float) @ T[:3, :3].T + T[:3, 3]
+    if len(p) < 4:
+        return []
+    c = p.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((p - c).T))
+    out = []
+    for axis in vecs.T:
+        F = np.eye(4)
+        F[:3, :3] = Rotation.from_rotvec(np.pi * axis).as_matrix()
+        F[:3, 3] = c - F[:3, :3] @ c
+        out.append(F @ T)
+    return out

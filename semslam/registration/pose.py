@@ -27,10 +27,11 @@ from ..errors import InputError, RegistrationError
 from ..geometry import RigidTransform, orthonormalize_transform
 from ..symmetry import Symmetry
 from .coarse import align_prerejective
-from .covariance import point_to_plane_information, tangent_covariance, xyz_rpy_covariance_of_inverse
+from .covariance import calibration_of, pose_covariance, widen_untrusted
 from ._icp_kernels import icp_plane_field, icp_plane_field_batch
 from .icp import ICP_METHODS, align_icp
 from .pose_model import PoseConfig, PoseModel, _nearest, prepare_pose_model
+from .ambiguity import half_turns
 from .result import RegistrationResult, _inlier_statistics_of_distances
 from .upright import upright_rotations
 from .search import RangeImage, rotation_distances, search_hypotheses
@@ -200,11 +201,16 @@ def estimate_object_pose(
         coarse_ok, coarse_fitness = True, extras["coarse_fitness"]
         t3 = time.perf_counter()
     T_os = fine.T_target_source.matrix  # T_object_scanner
-    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference, nearest)
+    alternatives = extras.pop("_alternatives", ())
+    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference, nearest,
+                              alternatives=alternatives)
     T_so_can = cov[1]
     cov = cov[0]
     t4 = time.perf_counter()
     reliable, ambiguous = pose_verdict(coarse_ok, fine.fitness, fine.inlier_rmse_m, vis, margin, cfg)
+    aligned = bool(fine.fitness >= cfg.min_fitness and fine.inlier_rmse_m <= cfg.max_rmse_m
+                   and not (np.isfinite(vis) and vis > cfg.max_visibility))
+    cov = widen_untrusted(cov, aligned=aligned, ambiguous=ambiguous, radius_m=model.radius_m)
     return PoseEstimate(
         T_scanner_object=RigidTransform(T_so_can), covariance_6x6=cov, fitness=fine.fitness,
         rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=coarse_fitness,
@@ -337,18 +343,23 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m
     sg_pts = None
     Ts = []
+    # the half-turns of the search's best hypothesis are refined and scored with the others: a near-equal flip the
+    # search did not keep still makes the pose ambiguous (a wide covariance) instead of confidently wrong
+    inits = [h.T_object_scanner for h in hyps] + (half_turns(hyps[0].T_object_scanner, pts) if hyps and upright is None
+                                                  else [])
+    hyps = list(hyps) + [hyps[0]] * (len(inits) - len(hyps))
     if field_icp and hyps:  # ICP of the search points (fast), the hypotheses on both cores
         f = model.distance_field
         Ts = list(icp_plane_field_batch(
-            np.ascontiguousarray(pts, dtype=np.float64), np.stack([h.T_object_scanner for h in hyps]), f.params,
+            np.ascontiguousarray(pts, dtype=np.float64), np.stack(inits), f.params,
             f.index, model.icp_target.points_xyz_m, model.normals_object, float(wide), int(cfg.icp_max_iterations),
             1e-4, 1e-5)[0])
-    for h in hyps if not field_icp else ():
+    for T0 in inits if not field_icp else ():
         if model.icp_target.method in ("plane", "point"):  # small_gicp directly: one source cloud, no statistics
             sg_pts = small_gicp.PointCloud(np.ascontiguousarray(pts, dtype=np.float64)) if sg_pts is None else sg_pts
-            Ts.append(_small_gicp_T(sg_pts, model, cfg, h.T_object_scanner, wide))
+            Ts.append(_small_gicp_T(sg_pts, model, cfg, T0, wide))
         else:
-            Ts.append(_icp_small_gicp(pts, model, cfg, h.T_object_scanner, wide).T_target_source.matrix)
+            Ts.append(_icp_small_gicp(pts, model, cfg, T0, wide).T_target_source.matrix)
     # scored on the whole cluster
     back = back_facing_shares(cluster, vp, model, Ts) if cfg.back_facing_weight > 0 else np.zeros(len(Ts))
     refined = [(fit + cfg.visibility_weight * vis + cfg.back_facing_weight * b, fit, vis, T, h)
@@ -362,62 +373,39 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         final = _icp_small_gicp(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
     Tb = best[3]
     margin = float("inf")
+    distinct = []  # the hypotheses not equivalent to the best (another basin): the covariance's spread
     for other in refined[1:]:
         To = other[3]
         rot = rotation_distances(Tb[:3, :3], To[None, :3, :3], sym)[0]
         # positions of the object origin in the scanner frame
         dt = np.linalg.norm(Tb[:3, :3].T @ Tb[:3, 3] - To[:3, :3].T @ To[:3, 3])
         if rot > np.radians(10.0) or dt > 0.01:
-            margin = other[0] - best[0]
-            break
+            margin = min(margin, other[0] - best[0])
+            distinct.append((float(other[0] - best[0]), To))
     extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
               "n_hypotheses": len(rotations), "search_points": len(pts), "upright": upright is not None,
-              "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined]}
+              "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined],
+              # for the covariance's hypothesis spread (popped by estimate_object_pose)
+              "_alternatives": distinct}
     return final, best[2], margin, extras, t2, nearest
 
 
 def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os: np.ndarray, canonical_reference,
-                nearest=None):
-    """Canonicalised ``T_scanner_object`` and its xyz-rpy covariance from the point-to-plane information.
-    ``nearest``: ``(p, d, j)`` of :func:`_icp_field_nearest` under ``T_os`` (computed here when None)."""
+                nearest=None, *, alternatives=()):
+    """Canonicalised ``T_scanner_object`` and its xyz-rpy covariance (:func:`.covariance.pose_covariance`: the
+    point-to-plane information at the residual scale over the effectively independent points, floors, and the
+    spread of the search's ``alternatives``). ``nearest``: ``(p, d, j)`` of :func:`_icp_field_nearest` under
+    ``T_os`` (computed here when None)."""
     if nearest is None:
         p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
         d, j = _nearest(model, p, cfg.icp_max_correspondence_m)
     else:
         p, d, j = nearest
-    ok = np.isfinite(d)
-    n_j = model.normals_object[j[ok]]
-    good = np.linalg.norm(n_j, axis=1) > 0.5
-    p_in, n_in = p[ok][good], n_j[good]
-    r = np.einsum("ij,ij->i", p_in - model.icp_target.points_xyz_m[j[ok][good]], n_in)
-    if len(r) < 7:
-        info, sigma2 = np.zeros((6, 6)), np.inf
-    else:
-        info, sigma2 = point_to_plane_information(p_in, n_in, r)
-    # canonicalise: T_scanner_object' = T_scanner_object S  <=>  T_object_scanner' = S^T T_object_scanner
-    T_so = np.linalg.inv(T_os)
-    R_can = sym.canonicalize(T_so[:3, :3], reference=canonical_reference)
-    S = T_so[:3, :3].T @ R_can
-    T_so_can = T_so.copy()
-    T_so_can[:3, :3] = R_can
-    B = np.kron(np.eye(2), S.T)  # left perturbation in the object frame rotates with S^T
-    if np.isfinite(sigma2):
-        C_delta = tangent_covariance(B @ info @ B.T, sigma2, inflation=cfg.covariance_inflation,
-                                     unobservable_rotation_axes=sym.unobservable_axes,
-                                     unobservable_variance_rad2=cfg.unobservable_variance_rad2)
-        C_delta = _apply_floor(C_delta, cfg)
-        cov = xyz_rpy_covariance_of_inverse(np.linalg.inv(T_so_can), C_delta)
-    else:
-        cov = np.diag([1e2, 1e2, 1e2, 1e4, 1e4, 1e4])
-    return (cov, T_so_can), sigma2
-
-
-def _apply_floor(C: np.ndarray, cfg: PoseConfig) -> np.ndarray:
-    """Add the variance floors (isotropic per block) so no direction is over-confident."""
-    out = C.copy()
-    out[:3, :3] += cfg.min_sigma_translation_m ** 2 * np.eye(3)
-    out[3:, 3:] += cfg.min_sigma_rotation_rad ** 2 * np.eye(3)
-    return out
+    cal = calibration_of(cfg)
+    cov, T_so_can, diag = pose_covariance(p, d, j, model.icp_target.points_xyz_m, model.normals_object, T_os, sym,
+                                          canonical_reference=canonical_reference, alternatives=alternatives,
+                                          calibration=cal, unobservable_variance_rad2=cfg.unobservable_variance_rad2)
+    return (cov, T_so_can), diag["sigma2_m2"]
 
 
 def _coarse_ransac(cluster, vp, model: PoseModel, cfg: PoseConfig, seed):

@@ -107,14 +107,13 @@ class PoseConfig:
     model_normals_k: int = 15
     #: Voxel leaf of the model used by ICP (0 = every model point).
     model_icp_voxel_m: float = 0.0015
-    #: Multiplies the Gauss-Newton covariance (correlated residuals, model and motion errors). With the
-    #: floors below, calibrated so that the mean NEES of the correct poses is ~6 over the four fittings on
-    #: the simulator's laser scans (``benchmarks/pose_accuracy.py --calibrate``).
-    covariance_inflation: float = 5.0
+    #: Multiplies the Gauss-Newton covariance, itself counted over the effectively independent residuals
+    #: (:class:`~semslam.registration.covariance.CovarianceCalibration`, issue 29: ``benchmarks/real_models.py``).
+    covariance_inflation: float = 1.0
     #: Floors added to the variances (per axis, in the object frame): no direction is more certain than this
     #: (the scans are distorted by the vehicle's motion within a scan; the database views are noisy).
     min_sigma_translation_m: float = 0.001
-    min_sigma_rotation_rad: float = 0.04
+    min_sigma_rotation_rad: float = 0.03
     #: Variance given to a rotation the symmetry makes unobservable (rad^2): effectively no information.
     unobservable_variance_rad2: float = 1e4
     #: Reliability thresholds: fitness (inlier fraction within ``icp_max_correspondence_m``), RMSE,
