@@ -131,9 +131,9 @@ def test_bad_meshes_raise(tmp_path):
     (d / "part.obj").write_text("this is not a mesh\n")
     with pytest.raises(DatabaseError, match=r"class 'part'.*part\.obj"):
         read_models(d)
-    (d / "models.toml").write_text('[part]\nfile = "part.step"\nunit = "mm"\n')
-    (d / "part.step").write_text("ISO-10303-21;\n")
-    with pytest.raises(DatabaseError, match=r"must be STL, OBJ or PLY.*'\.step'"):
+    (d / "models.toml").write_text('[part]\nfile = "part.3ds"\nunit = "mm"\n')
+    (d / "part.3ds").write_text("3DS\n")
+    with pytest.raises(DatabaseError, match=r"format semslam does not read.*STL, OBJ, PLY, COLLADA.*'\.3ds'"):
         read_models(d)
     tiny = _box_dir(tmp_path, GOOD, trimesh.creation.box(extents=(2.0, 2.0, 2.0)))  # 2 mm cube in mm
     with pytest.raises(DatabaseError, match=r"3\.464 mm across .*expected 5 mm to 20 m: check 'unit'"):

@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     src.add_argument("--builtin", action="store_true",
                      help="the four built-in objects acquired by the simulated Kinect-like camera")
     src.add_argument("--models", metavar="MODELS_DIR",
-                     help="your CAD models (STL, OBJ, PLY + models.toml: file, unit, symmetry, T_mesh_object per "
+                     help="your CAD models (STL, OBJ, PLY, COLLADA, glTF, STEP + models.toml: file, unit, symmetry, T_mesh_object per "
                           "class) acquired by the simulated Kinect-like camera")
     build.add_argument("--fuse", action="store_true",
                        help="VIEWS_DIR views are in their own sensor frames: align each class's views into one "

@@ -17,7 +17,7 @@ def register(sub, common) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace the run directory if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--models", default=None, metavar="DIR",
-                   help="your CAD models (models.toml + STL/OBJ/PLY, as for 'db build --models'): the database and the "
+                   help="your CAD models (models.toml + STL/OBJ/PLY/DAE/glTF/STEP, as for 'db build --models'): the database and the "
                         "mission's objects are yours instead of the built-in fittings")
     p.set_defaults(func=run)
 

@@ -1,14 +1,27 @@
 """Users' CAD models as object classes of a view database (``semslam db build --models MODELS_DIR``).
 
-``MODELS_DIR`` holds the meshes (STL, OBJ or PLY, read with trimesh) and ``models.toml``, one table per
-class, the table's name being the class label::
+``MODELS_DIR`` holds the model files and ``models.toml``, one table per class, the table's name being the
+class label::
 
     [spool]
     file = "spool.stl"          # relative to MODELS_DIR
-    unit = "mm"                 # the mesh file's unit: m, mm, cm or inch (required: STL has no unit)
+    unit = "mm"                 # the file's unit: m, mm, cm or inch (required for STL, OBJ and PLY, which state
+                                # none; optional for COLLADA, glTF and STEP, which do, and then it overrides them)
     symmetry = "none"           # optional, default "none"; "discrete:2:z" (order 2 about the object's z axis),
                                 # "continuous:z" (axisymmetric about z); axes x, y or z of the object frame
     # T_mesh_object = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # optional
+
+Formats (:data:`MESH_FORMATS`, read with trimesh): STL, OBJ and PLY; COLLADA ``.dae`` (needs ``pycollada``:
+``pip install 'semslam[models]'``); glTF ``.gltf``/``.glb``; STEP ``.step``/``.stp`` (needs ``cascadio``, which
+bundles OpenCASCADE under the LGPL-2.1: ``pip install 'semslam[step]'``). Units: STL, OBJ and PLY state none,
+so ``unit`` is required; a COLLADA file's ``<unit meter="...">`` (1 m when absent, as the COLLADA spec says),
+glTF's metres (its spec) and a STEP file's length unit (applied by OpenCASCADE) are used when ``unit`` is
+not given. **A ``unit`` in models.toml wins** over the file's own: the file's numbers are then read in that
+unit, with a :class:`ModelUnitWarning` when the two differ. Coordinates are taken as written (no up-axis
+conversion: a glTF model is usually y-up, which matters only for ``symmetry`` and ``T_mesh_object`` axes).
+A COLLADA, glTF or STEP scene holding several meshes is read as **one** rigid object: its meshes, placed by
+the scene's transforms, are concatenated, with a :class:`MultiMeshSceneWarning` (put each object in its own
+file to make separate classes). An OBJ file's groups are concatenated silently, as before.
 
 The class's canonical (object) frame is, by default, the mesh's axes with the origin at the centre of its
 axis-aligned bounding box (the convention of the built-in objects, :mod:`semslam.simulation.objects`).
@@ -18,10 +31,12 @@ frame (``p_mesh = T_mesh_object @ p_object``), its translation in the mesh file'
 
 Checks (each a one-line :class:`~semslam.errors.DatabaseError` naming the file, the class and the key):
 ``models.toml`` missing or not valid TOML, a class that is not a table, an unknown key, a missing
-``file`` or ``unit``, a mesh file not found or not STL/OBJ/PLY or unreadable, an unknown unit, a bad symmetry
-string, a ``T_mesh_object`` that is not a rigid transform, a mesh without triangles, non-finite vertices,
-and an absurd size for the stated unit (bounding-box diagonal below 5 mm or above 20 m after conversion:
-usually the wrong ``unit``). A mesh that is not watertight is accepted with a
+``file``, a missing ``unit`` for a format that states none, a model file not found, in a format semslam does
+not read (the message lists those it reads) or unreadable, a COLLADA or STEP file whose optional reader is not
+installed (the message says what to install), an unknown unit, a bad symmetry string, a ``T_mesh_object``
+that is not a rigid transform, a mesh without triangles, non-finite vertices, and an absurd size (bounding-box
+diagonal below 5 mm or above 20 m after the unit conversion: usually the wrong unit). A mesh that is not
+watertight is accepted with a
 :class:`NonWatertightMeshWarning`: its views render, but it has no centre of mass, so it rests on its
 canonical x-y plane (z up) instead of its most stable face, and the Kinect aims at its bounding-box centre.
 
@@ -31,8 +46,14 @@ around each object in its most probable resting pose, as for the built-in databa
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import importlib.util
 import math
+import os
+import re
+import sys
+import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -50,9 +71,12 @@ from .config import KinectConfig
 from .objects import ObjectModel, make_object
 
 __all__ = [
+    "MESH_FORMATS",
     "MESH_SUFFIXES",
     "MODELS_FILE",
     "UNITS_M",
+    "ModelUnitWarning",
+    "MultiMeshSceneWarning",
     "NonWatertightMeshWarning",
     "build_models_database",
     "models_view_clouds",
@@ -64,8 +88,23 @@ __all__ = [
 MODELS_FILE = "models.toml"
 #: Metres per unit of the mesh files.
 UNITS_M = {"m": 1.0, "mm": 0.001, "cm": 0.01, "inch": 0.0254}
-#: Mesh files read.
-MESH_SUFFIXES = (".stl", ".obj", ".ply")
+#: Model file formats read: suffix -> (format name, whether the file states its unit, the optional module
+#: trimesh needs to read it or None).
+MESH_FORMATS = {
+    ".stl": ("STL", False, None), ".obj": ("OBJ", False, None), ".ply": ("PLY", False, None),
+    ".dae": ("COLLADA", True, "collada"),
+    ".gltf": ("glTF", True, None), ".glb": ("glTF", True, None),
+    ".step": ("STEP", True, "cascadio"), ".stp": ("STEP", True, "cascadio"),
+}
+#: Model files read (suffixes, lower case).
+MESH_SUFFIXES = tuple(MESH_FORMATS)
+#: Optional readers: module -> (PyPI package, semslam extra that installs it).
+OPTIONAL_READERS = {"collada": ("pycollada", "models"), "cascadio": ("cascadio", "step")}
+#: Metres per length unit named in a STEP file (``SI_UNIT`` prefixes of the metre; ``CONVERSION_BASED_UNIT`` names).
+_STEP_SI_PREFIX_M = {"$": 1.0, ".KILO.": 1e3, ".DECI.": 0.1, ".CENTI.": 0.01, ".MILLI.": 1e-3, ".MICRO.": 1e-6,
+                     ".NANO.": 1e-9}
+_STEP_NAMED_M = {"INCH": 0.0254, "FOOT": 0.3048, "YARD": 0.9144, "MILE": 1609.344, "MILLIMETRE": 1e-3,
+                 "MILLIMETER": 1e-3, "CENTIMETRE": 1e-2, "CENTIMETER": 1e-2, "METRE": 1.0, "METER": 1.0}
 #: Keys of a class table.
 KEYS = ("file", "unit", "symmetry", "T_mesh_object")
 #: Plausible object sizes: bounding-box diagonal, metres (after the unit conversion).
@@ -80,6 +119,14 @@ _AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 class NonWatertightMeshWarning(UserWarning):
     """A model mesh has holes: accepted, but without a centre of mass (see the module docstring)."""
+
+
+class MultiMeshSceneWarning(UserWarning):
+    """A COLLADA, glTF or STEP file holds several meshes: concatenated into one rigid object (one class)."""
+
+
+class ModelUnitWarning(UserWarning):
+    """The ``unit`` of models.toml differs from the unit the model file states: the models file wins."""
 
 
 def parse_symmetry(text: Any, *, where: str = "The symmetry") -> Symmetry:
@@ -120,19 +167,157 @@ def _transform(value: Any, where: str) -> np.ndarray:
     return T
 
 
-def _load_mesh(path: Path, scale: float, where: str) -> trimesh.Trimesh:
-    """The triangles of ``path`` in metres (vertices merged), checked for emptiness and non-finite values."""
+def _formats_text() -> str:
+    names = dict.fromkeys(name for name, _, _ in MESH_FORMATS.values())
+    return f"{', '.join(names)} ({', '.join(MESH_SUFFIXES)})"
+
+
+def _has_module(name: str) -> bool:
+    """Whether ``name`` can be imported (without importing it; a ``None`` in ``sys.modules`` blocks it)."""
+    if name in sys.modules:
+        return sys.modules[name] is not None
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def step_length_unit_m(path: str | Path) -> float | None:
+    """Metres per length unit of the STEP file ``path`` (its first ``LENGTH_UNIT``: an ``SI_UNIT`` of the metre
+    with its prefix, or a ``CONVERSION_BASED_UNIT`` such as ``'INCH'``), or None when it states none readable."""
+    text = Path(path).read_text(encoding="latin-1", errors="replace")
+    for match in re.finditer(r"=\s*\(([^;]*?LENGTH_UNIT\s*\(\s*\)[^;]*);", text, flags=re.S | re.I):
+        entity = re.sub(r"\s+", "", match.group(1)).upper()
+        si = re.search(r"SI_UNIT\(([^,]*),\.METRE\.\)", entity)
+        if si and si.group(1) in _STEP_SI_PREFIX_M:
+            return _STEP_SI_PREFIX_M[si.group(1)]
+        named = re.search(r"CONVERSION_BASED_UNIT\('([^']*)'", entity)
+        if named and named.group(1).strip().upper() in _STEP_NAMED_M:
+            return _STEP_NAMED_M[named.group(1).strip().upper()]
+    return None
+
+
+def _file_unit_m(scene: Any, name: str, path: Path) -> tuple[float | None, str]:
+    """Metres per number written in the COLLADA/glTF/STEP file ``path`` as the file states it (None when
+    unreadable), and its description for messages."""
+    if name == "glTF":
+        return 1.0, "glTF's metres"
+    if name == "STEP":
+        unit_m = step_length_unit_m(path)
+        return unit_m, ("an unreadable STEP length unit" if unit_m is None else f"the STEP length unit {unit_m:g} m")
+    units = str(getattr(scene, "units", None) or "meters")  # trimesh: "meters" or "<unitmeter> * meters"
+    m = re.fullmatch(r"\s*([0-9.eE+-]+)\s*\*\s*meters?\s*", units)
+    unit_m = float(m.group(1)) if m else (1.0 if units.strip() in ("meters", "meter", "m") else None)
+    if unit_m is None or not math.isfinite(unit_m) or unit_m <= 0:
+        return None, f"the unreadable COLLADA unit {units!r}"
+    return unit_m, f'the COLLADA <unit meter="{unit_m:g}">'
+
+
+@contextlib.contextmanager
+def _native_output_captured():
+    """Yields a list filled, on exit, with the lines native code (OpenCASCADE) wrote to file descriptors 1 and 2
+    meanwhile, instead of letting them reach the terminal."""
+    lines: list[str] = []
+    saved = []
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        try:
+            for fd in (1, 2):
+                saved.append((fd, os.dup(fd)))
+            sys.stdout.flush()
+            sys.stderr.flush()
+            for fd, _ in saved:
+                os.dup2(sink.fileno(), fd)
+        except OSError:  # no usable descriptors (embedded interpreter): leave the output alone
+            pass
+        try:
+            yield lines
+        finally:
+            for fd, copy in saved:
+                os.dup2(copy, fd)
+                os.close(copy)
+            sink.seek(0)
+            text = re.sub(r"\x1b\[[0-9;]*m", "", sink.read().decode("utf-8", errors="replace"))
+            lines.extend(line.strip(" *") for line in text.splitlines() if line.strip(" *"))
+
+
+def _load_scene(path: Path, name: str, where: str) -> tuple[list[trimesh.Trimesh], Any]:
+    """The triangle meshes of a COLLADA/glTF/STEP file placed by its scene graph (in the file's numbers)."""
+    load = getattr(trimesh, "load_scene", None)
+    native: list[str] = []
+    try:
+        if name == "STEP":  # OpenCASCADE prints its parse errors: kept for the message
+            with _native_output_captured() as native:
+                scene = load(path, process=False) if load else trimesh.load(path, force="scene", process=False)
+        else:
+            scene = load(path, process=False) if load else trimesh.load(path, force="scene", process=False)
+    except Exception as exc:  # trimesh and its readers raise many types on a bad file
+        reason = native[0] if native else (str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        raise DatabaseError(f"{where}: cannot read the {name} file {str(path)!r}: "
+                            f"{'OpenCASCADE: ' if native else ''}{reason}") from None
+    if isinstance(scene, trimesh.Trimesh):
+        return ([scene] if len(scene.faces) else []), scene
+    meshes = []
+    for node in scene.graph.nodes_geometry:
+        T, geometry_name = scene.graph[node]
+        geometry = scene.geometry.get(geometry_name)
+        if isinstance(geometry, trimesh.Trimesh) and len(geometry.faces):
+            meshes.append(trimesh.Trimesh(np.asarray(geometry.vertices, dtype=float), np.asarray(geometry.faces),
+                                          process=False).apply_transform(np.asarray(T, dtype=float)))
+    return meshes, scene
+
+
+def _load_mesh(path: Path, unit: str | None, where: str) -> tuple[trimesh.Trimesh, str, float]:
+    """The triangles of ``path`` in metres (vertices merged), checked for emptiness and non-finite values, the
+    unit used (for messages) and metres per unit of the file's numbers (for ``T_mesh_object``). ``unit``
+    (models.toml) overrides the unit the file states."""
     if not path.is_file():
         raise DatabaseError(f"{where}: the mesh file {str(path)!r} does not exist or is not a regular file.")
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise DatabaseError(f"{where}: the mesh file {str(path)!r} must be STL, OBJ or PLY "
-                            f"({', '.join(MESH_SUFFIXES)}). Got {path.suffix or 'no suffix'!r} instead.")
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types on a bad file
-        raise DatabaseError(f"{where}: cannot read the mesh file {str(path)!r}: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_FORMATS:
+        raise DatabaseError(f"{where}: the mesh file {str(path)!r} is in a format semslam does not read; expected "
+                            f"one of {_formats_text()}. Got {path.suffix or 'no suffix'!r} instead.")
+    name, states_unit, module = MESH_FORMATS[suffix]
+    if module is not None and not _has_module(module):
+        package, extra = OPTIONAL_READERS[module]
+        raise DatabaseError(f"{where}: reading the {name} file {str(path)!r} needs the optional reader {package!r}, "
+                            f"which is not installed: pip install 'semslam[{extra}]' (or pip install {package}).")
+    if not states_unit:
+        try:
+            mesh = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many types on a bad file
+            raise DatabaseError(f"{where}: cannot read the mesh file {str(path)!r}: {exc}") from None
+        meshes = [mesh] if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) else []
+        assert unit is not None  # read_models requires it for these formats
+        scale, unit_text, number_m = UNITS_M[unit], f"unit {unit!r}", UNITS_M[unit]
+    else:
+        meshes, scene = _load_scene(path, name, where)
+        file_unit_m, file_unit_text = _file_unit_m(scene, name, path)
+        # trimesh gives COLLADA's and glTF's numbers as written; OpenCASCADE converts STEP's to metres
+        loaded_per_number = file_unit_m if name == "STEP" else 1.0
+        if unit is not None:
+            if loaded_per_number is None:
+                raise DatabaseError(f"{where}: 'unit' cannot override the unit of the STEP file {str(path)!r}: its "
+                                    f"length unit is unreadable. Remove 'unit' to use OpenCASCADE's conversion.")
+            number_m, unit_text = UNITS_M[unit], f"unit {unit!r} (from the models file)"
+            scale = number_m / loaded_per_number
+            if file_unit_m is not None and not math.isclose(number_m, file_unit_m, rel_tol=1e-6):
+                warnings.warn(f"{where}: the models file's 'unit' = {unit!r} ({number_m:g} m) overrides "
+                              f"{file_unit_text} of {str(path)!r}.", ModelUnitWarning, stacklevel=3)
+        elif name == "STEP":  # already metres (an unreadable unit: OpenCASCADE's default conversion)
+            number_m, scale, unit_text = file_unit_m or 1.0, 1.0, f"{file_unit_text} (from the file)"
+        elif file_unit_m is None:
+            raise DatabaseError(f"{where}: the {name} file {str(path)!r} states {file_unit_text}; give the class "
+                                f"a 'unit' (one of {', '.join(UNITS_M)}).")
+        else:
+            number_m = scale = file_unit_m
+            unit_text = f"{file_unit_text} (from the file)"
+        if len(meshes) > 1:
+            warnings.warn(f"{where}: the {name} file {str(path)!r} holds {len(meshes)} meshes: concatenated into one "
+                          f"rigid object (one class); put each object in its own file to make separate classes.",
+                          MultiMeshSceneWarning, stacklevel=3)
+    if not meshes:
         raise DatabaseError(f"{where}: the mesh file {str(path)!r} must hold triangles. Got none instead (empty mesh).")
+    mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
     vertices = np.asarray(mesh.vertices, dtype=float)
     bad = ~np.all(np.isfinite(vertices), axis=1)
     if bad.any():
@@ -141,7 +326,7 @@ def _load_mesh(path: Path, scale: float, where: str) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(vertices * scale, np.asarray(mesh.faces), process=False)
     mesh.merge_vertices()  # STL repeats each triangle's corners: merged, in metres, so m and mm files agree
     mesh.remove_unreferenced_vertices()
-    return mesh
+    return mesh, unit_text, number_m
 
 
 def read_models(models_dir: str | Path) -> dict[str, ObjectModel]:
@@ -180,30 +365,33 @@ def read_models(models_dir: str | Path) -> dict[str, ObjectModel]:
         unknown = [k for k in entry if k not in KEYS]
         if unknown:
             raise DatabaseError(f"{where} has the unknown key {unknown[0]!r}. Expected keys: {', '.join(KEYS)}.")
+        if "file" not in entry:
+            raise DatabaseError(f"{where} is missing the key 'file' (the mesh file, relative to the models folder). "
+                                f"Got no such key.")
         for key in ("file", "unit"):
-            if key not in entry:
-                raise DatabaseError(f"{where} is missing the key {key!r}"
-                                    + (" (the mesh file, relative to the models folder)." if key == "file" else
-                                       f" (the mesh file's unit: one of {', '.join(UNITS_M)}).") + " Got no such key.")
-            if not isinstance(entry[key], str) or not entry[key]:
+            if key in entry and (not isinstance(entry[key], str) or not entry[key]):
                 raise DatabaseError(f"{where} must have a non-empty string {key!r}. Got {entry[key]!r} instead.")
-        unit = entry["unit"]
-        if unit not in UNITS_M:
+        states_unit = MESH_FORMATS.get(Path(entry["file"]).suffix.lower(), ("", True, None))[1]
+        if "unit" not in entry and not states_unit:
+            raise DatabaseError(f"{where} is missing the key 'unit' (the mesh file's unit: one of {', '.join(UNITS_M)}; "
+                                f"STL, OBJ and PLY files state none). Got no such key.")
+        unit = entry.get("unit")
+        if unit is not None and unit not in UNITS_M:
             raise DatabaseError(f"{where} has an unknown 'unit': expected one of {', '.join(UNITS_M)}. Got {unit!r} instead.")
         symmetry = parse_symmetry(entry.get("symmetry", "none"), where=f"{where}: 'symmetry'")
         T_mesh_object = None
         if "T_mesh_object" in entry:
             T_mesh_object = _transform(entry["T_mesh_object"], f"{where}: 'T_mesh_object'")
         mesh_path = root / entry["file"]
-        mesh = _load_mesh(mesh_path, UNITS_M[unit], where)
+        mesh, unit_text, number_m = _load_mesh(mesh_path, unit, where)
         diagonal = float(np.linalg.norm(np.ptp(mesh.bounds, axis=0)))
         if not MIN_DIAGONAL_M <= diagonal <= MAX_DIAGONAL_M:
             raise DatabaseError(f"{where}: the mesh {str(mesh_path)!r} is {diagonal * 1000:.4g} mm across (bounding-box "
-                                f"diagonal) with unit {unit!r}; expected {MIN_DIAGONAL_M * 1000:g} mm to "
+                                f"diagonal) with {unit_text}; expected {MIN_DIAGONAL_M * 1000:g} mm to "
                                 f"{MAX_DIAGONAL_M:g} m: check 'unit'.")
         if T_mesh_object is not None:
             T = T_mesh_object.copy()
-            T[:3, 3] *= UNITS_M[unit]
+            T[:3, 3] *= number_m
             mesh.apply_transform(np.linalg.inv(T))  # mesh frame -> object frame
         if not mesh.is_watertight:
             warnings.warn(f"{where}: the mesh {str(mesh_path)!r} is not watertight (holes or open edges); its views "
