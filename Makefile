@@ -14,6 +14,8 @@ $(STAMP): pyproject.toml
 	@test -x $(VPY) || $(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --upgrade pip
 	$(VPY) -m pip install --quiet -e ".[test]"
+	@# Debian's ROS 1, when installed, reached through a bridge of ROS-only modules (docs/ros1.md; never fatal)
+	-$(VPY) -m semslam.run.ros1.bridge --if-present
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -1,0 +1,242 @@
+"""The ROS 1 node on a real roscore, no mocks: a simulated dive played with `rosbag play`, the node's outputs
+recorded with `rosbag record` and read back with semslam's bag reader, compared with the offline chain
+(detect_mission + run_slam) on the same bag. Everything started is stopped by PID; ROS logs stay in tmp_path."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from ros1_helpers import free_port, require_ros, ros_env, roscore, started, stop
+
+pytestmark = pytest.mark.slow
+
+
+def _wait(cond, timeout_s: float, what: str, log=None) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > deadline:
+            tail = log.read_text(errors="replace")[-3000:] if log is not None and log.exists() else ""
+            raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}\n{tail}")
+        time.sleep(0.2)
+
+
+def _node_up(uri: str, name: str) -> bool:
+    import rosgraph
+
+    try:
+        rosgraph.Master("/semslam_test", master_uri=uri).lookupNode(name)
+        return True
+    except Exception:  # noqa: BLE001 - not registered yet
+        return False
+
+
+def _subscribed(uri: str, topic: str, n: int = 1) -> bool:
+    import rosgraph
+
+    _, subs, _ = rosgraph.Master("/semslam_test", master_uri=uri).getSystemState()
+    return any(t == topic and len(nodes) >= n for t, nodes in subs)
+
+
+@pytest.fixture(scope="module")
+def dive(tmp_path_factory):
+    """A 24 s simulated dive with objects (40k-point scans) as a ROS 1 bag, its topic map, vehicle file and the
+    built-in database file."""
+    require_ros()
+    from semslam.dataset import write_mission, read_mission, write_vehicle_toml
+    from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
+    from semslam.recognition.storage import save_database
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation.builtin_db import builtin_database
+    from semslam.simulation.config import ScannerConfig
+
+    d = tmp_path_factory.mktemp("dive")
+    cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1), scanner=ScannerConfig(n_lines=200,
+                                                                                                  points_per_line=200))
+    mission = read_mission(write_mission(simulate_mission(cfg, seed=4), d / "mission"))
+    bag = write_bag(mission, d / "dive.bag", "ros1")
+    (d / "topics.toml").write_text(SEMSLAM_TOPICS.to_toml(), encoding="utf-8")
+    write_vehicle_toml(mission.vehicle, d / "vehicle.toml")
+    save_database(builtin_database(seed=0), d / "objects.npz")
+    return {"bag": bag, "topics": d / "topics.toml", "vehicle": d / "vehicle.toml", "db": d / "objects.npz",
+            "mission": mission}
+
+
+def _offline(dive, tmp_path):
+    """`semslam run` of the bag (run_dive, the one runner): its pose trajectory and landmarks as written."""
+    import csv
+
+    from semslam.recognition import load_database
+    from semslam.run.dive import run_dive
+
+    out = tmp_path / "offline"
+    out.mkdir()
+    payload = run_dive(dive["bag"], out, db=load_database(dive["db"]), modes=("pose",), topics=dive["topics"],
+                       vehicle=dive["vehicle"], export=False)
+    rows = list(csv.DictReader(open(out / "slam" / "pose" / "trajectory.csv", encoding="utf-8")))
+    lms = list(csv.DictReader(open(out / "slam" / "pose" / "landmarks.csv", encoding="utf-8")))
+    return {"stamps_s": np.array([float(r["stamp_s"]) for r in rows]),
+            "position_ned_m": np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows]),
+            "landmarks": [(r["label"], int(r["landmark_id"]), np.array([float(r[k]) for k in ("x_m", "y_m", "z_m")]))
+                          for r in lms], "payload": payload, "dir": out}
+
+
+def test_node_on_a_real_roscore_matches_the_offline_run(dive, tmp_path):
+    """rosbag play -> node -> rosbag record: every odometry within 5 cm of the offline filter at its stamp, one
+    ellipsoid per mapped landmark where the offline map has it, diagnostics OK; at SIGINT the run directory holds
+    the offline trajectory (to 1e-6 m when no message was dropped)."""
+    from semslam.io.ros import open_bag
+
+    run = tmp_path / "run"
+    with roscore(tmp_path) as env:
+        uri = env["ROS_MASTER_URI"]
+        node_cmd = [sys.executable, "-m", "semslam.run.ros1.node", "--db", str(dive["db"]), "--topics",
+                    str(dive["topics"]), "--vehicle", str(dive["vehicle"]), "--mode", "pose", "--out", str(run),
+                    "--scan-queue", "all", "--max-hold", "1000", "--window", "4.5"]
+        with started(node_cmd, env, tmp_path / "node.log") as node:
+            ref = _offline(dive, tmp_path)  # while the node starts
+            _wait(lambda: _node_up(uri, "/semslam") and _subscribed(uri, "/semslam/scans"), 60, "the node",
+                  tmp_path / "node.log")
+            topics = ["/semslam/odometry", "/semslam/odometry/filtered", "/semslam/landmarks", "/diagnostics",
+                      "/semslam/path", "/tf", "/semslam/detections"]
+            # a loaded machine may need a while to close the bag: SIGINT, then up to 60 s to rename out.bag.active
+            with started(["rosbag", "record", "-O", str(tmp_path / "out.bag"), *topics], env,
+                         tmp_path / "record.log", stop_timeout_s=60.0) as rec:
+                _wait(lambda: _subscribed(uri, "/semslam/odometry"), 30, "rosbag record", tmp_path / "record.log")
+                play = subprocess.run(["rosbag", "play", "-q", "-d", "1", "-r", "1.5", str(dive["bag"])], env=env,
+                                      capture_output=True, text=True, timeout=120)
+                assert play.returncode == 0, play.stderr
+                time.sleep(3.0)  # the node recognises the last scans
+            assert rec.poll() is not None
+            stop(node, timeout=60.0)
+            assert node.returncode == 0, (tmp_path / "node.log").read_text()[-3000:]
+        assert node.poll() is not None
+    stats = json.loads((run / "ros_node.json").read_text())
+    assert stats["stats"]["scans_recognised"] == len(dive["mission"].scans)
+
+    odo, pred, markers, diags, n_tf, dets = [], [], None, [], 0, []
+    with open_bag(tmp_path / "out.bag") as b:
+        for m in b.messages(["/semslam/odometry", "/semslam/odometry/filtered", "/semslam/landmarks", "/diagnostics",
+                             "/tf", "/semslam/detections"]):
+            if m.topic.startswith("/semslam/odometry"):
+                s = m.msg.header.stamp
+                p = m.msg.pose.pose.position
+                (odo if m.topic.endswith("filtered") else pred).append((s.sec + s.nanosec * 1e-9, p.y, p.x, -p.z))
+                assert m.msg.header.frame_id == "map" and m.msg.child_frame_id == "base_link"
+            elif m.topic == "/tf":
+                n_tf += m.msg.transforms[0].child_frame_id == "base_link"
+            elif m.topic == "/semslam/landmarks":
+                markers = m.msg
+            elif m.topic == "/semslam/detections":
+                dets.append(m.msg)
+            else:
+                diags.append(m.msg.status[0])
+    # odometry: within 5 cm of the offline filter's history (interpolated at the odometry's stamp)
+    odo = np.array(odo)
+    assert len(odo) > 100
+    origin = stats["time_origin_ns"] / 1e9
+    rs, rp = ref["stamps_s"], ref["position_ned_m"]
+    t = odo[:, 0] - origin
+    inside = t <= rs[-1]
+    ref_p = np.stack([np.interp(t[inside], rs, rp[:, i]) for i in range(3)], axis=1)
+    err = np.linalg.norm(odo[inside, 1:] - ref_p, axis=1)
+    assert err.max() < 0.05, f"odometry off the offline run by up to {err.max():.3f} m"
+    # the low-latency odometry: one per attitude sample once the filter has started, as many TFs
+    pred = np.array(pred)
+    assert len(pred) > 0.8 * len(odo) and n_tf == len(pred)
+    t = pred[:, 0] - origin
+    inside = t <= rs[-1]
+    ref_p = np.stack([np.interp(t[inside], rs, rp[:, i]) for i in range(3)], axis=1)
+    pred_err = np.linalg.norm(pred[inside, 1:] - ref_p, axis=1)
+    print(f"predicted odometry vs offline: median {np.median(pred_err):.3f} m, max {pred_err.max():.3f} m")
+    assert np.median(pred_err) < 0.25
+    # landmarks: one ellipsoid per landmark of the offline map, at its position (ENU)
+    assert markers is not None
+    spheres = {(mk.ns, mk.id): mk for mk in markers.markers if mk.type == 2}
+    texts = {(mk.ns, mk.id) for mk in markers.markers if mk.type == 9}
+    assert len(ref["landmarks"]) >= 1 and len(spheres) == len(ref["landmarks"]) == len(texts)
+    for label, lid, p_ned in ref["landmarks"]:
+        p = spheres[(label, lid)].pose.position
+        assert np.linalg.norm(np.array([p.y, p.x, -p.z]) - p_ned) < 0.05
+    # /semslam/detections (semslam_msgs/DetectionArray, published raw), decoded from the recorded bytes: one array
+    # per recognised scan (the recorder stops while the node may still recognise the last ones), the detections
+    # kept for SLAM among them (reliable), as in the run directory
+    ids = [a.scan_id for a in dets]
+    assert len(set(ids)) == len(ids) and len(ids) >= len(dive["mission"].scans) // 2
+    kept: dict = {}
+    for line in open(run / "detections.jsonl", encoding="utf-8"):
+        d = json.loads(line)
+        kept[d["scan_id"]] = kept.get(d["scan_id"], 0) + 1
+    assert sum(kept.values()) >= 1
+    for a in dets:
+        assert sum(d.reliable for d in a.detections) == kept.get(a.scan_id, 0)
+        assert a.header.frame_id and all(len(d.pose.covariance) == 36 for d in a.detections)
+    # diagnostics: published, healthy while the bag played (the health verdict among them), with the scan counters
+    assert diags and all(s.name == "semslam: SLAM" for s in diags)
+    assert any(s.level == 0 and s.message == "OK" for s in diags)
+    last = {kv.key: kv.value for kv in diags[-1].values}
+    assert int(last["scans_recognised"]) >= 1 and "scan_latency_p90_ms" in last and last["verdict"] == "ok"
+    # the run directory written at SIGINT: the offline trajectory
+    import csv
+
+    rows = list(csv.DictReader(open(run / "slam" / "pose" / "trajectory.csv", encoding="utf-8")))
+    live_p = np.array([[float(r["x_m"]), float(r["y_m"]), float(r["z_m"])] for r in rows])
+    assert live_p.shape == rp.shape
+    assert np.abs(live_p - rp).max() < 0.05
+    if not stats["dropped_late"]:
+        np.testing.assert_allclose(live_p, rp, rtol=0, atol=1e-6)
+    # the same layout as `semslam run`: run.json with the start, counts and verdict
+    run_doc, ref_doc = (json.loads((d / "run.json").read_text()) for d in (run, ref["dir"]))
+    assert run_doc["format"] == "semslam-run" and run_doc["verdict"] == ref_doc["verdict"]
+    assert run_doc["start"] == ref_doc["start"] and run_doc["detection"]["n_kept"] == ref_doc["detection"]["n_kept"]
+    assert (run / "slam" / "pose" / "map.json").is_file()
+
+
+def test_node_without_a_roscore_says_so_in_one_line(dive, tmp_path):
+    home = tmp_path / "ros_home"
+    home.mkdir()
+    env = ros_env(f"http://127.0.0.1:{free_port()}", home)
+    out = subprocess.run([sys.executable, "-m", "semslam.run.ros1.node", "--db", str(dive["db"]), "--topics",
+                          str(dive["topics"]), "--vehicle", str(dive["vehicle"])], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 1
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error: No ROS master answers at ROS_MASTER_URI=")
+
+
+def test_node_refuses_a_mapped_topic_of_the_wrong_type(dive, tmp_path):
+    """The depth topic published as sensor_msgs/Imu: the node stops at once with one line naming the topic."""
+    with roscore(tmp_path) as env:
+        with started(["rostopic", "pub", "-r", "5", "/semslam/pressure", "sensor_msgs/Imu", "{}"], env,
+                     tmp_path / "pub.log"):
+            import rosgraph
+
+            _wait(lambda: "/semslam/pressure" in dict(rosgraph.Master("/t", master_uri=env["ROS_MASTER_URI"])
+                                                      .getTopicTypes()), 30, "rostopic pub", tmp_path / "pub.log")
+            out = subprocess.run([sys.executable, "-m", "semslam.run.ros1.node", "--db", str(dive["db"]), "--topics",
+                                  str(dive["topics"]), "--vehicle", str(dive["vehicle"])], env=env,
+                                 capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("semslam: error: Topic '/semslam/pressure' (topics.depth")
+    assert lines[0].endswith("Got sensor_msgs/msg/Imu instead.")
+
+
+def test_semslam_ros_without_a_roscore_says_so_in_one_line(dive, tmp_path, monkeypatch, capsys):
+    """The CLI `semslam ros` (cmd_ros.py through semslam.cli.main) with no master: one line, exit 1, no run dir."""
+    from semslam.cli.main import main
+
+    home = tmp_path / "ros_home"
+    home.mkdir()
+    for k, v in ros_env(f"http://127.0.0.1:{free_port()}", home).items():
+        monkeypatch.setenv(k, v)
+    rc = main(["ros", "--db", str(dive["db"]), "--topics", str(dive["topics"]), "--vehicle", str(dive["vehicle"]),
+               "--mode", "pose", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and len(err) == 1 and err[0].startswith("semslam: error: No ROS master answers at ROS_MASTER_URI=")
+    assert not (tmp_path / "run").exists()
