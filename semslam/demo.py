@@ -171,12 +171,10 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
         mission = read_mission(out / "mission")
 
-        # 3. recognition on every scan
-        rec_out = stages.run("recognise objects in every scan", _recognize_mission, mission, db, cfg, out, progress)
-
-        # 4. SLAM in every mode on the same detections
-        slam_results = stages.run("SLAM in every mode", _run_slam_modes, mission, rec_out["detections_by_scan"], cfg, out,
-                                  None if objects is None else {k: m.symmetry for k, m in objects.items()})
+        # 3-4. every scan recognised and SLAM in every mode, in one pass of the streaming runner (`semslam run`'s)
+        rec_out, slam_results = stages.run("recognise every scan, SLAM in every mode", _run_dive, mission, db, cfg,
+                                           out, progress, None if objects is None else
+                                           {k: m.symmetry for k, m in objects.items()})
 
         # 5. consensus figure data, metrics, report
         _write_consensus(out, mission, rec_out["detections_by_scan"], slam_results.get("pose"))
@@ -210,30 +208,43 @@ def _svm_for_loo(db, descriptor: str, cfg: DemoConfig):
     return SvmClassifier(c_log2=(c, c, 1), gamma_log2=(g, g, 1), seed=cfg.seed)
 
 
-def _recognize_mission(mission, db, cfg: DemoConfig, out: Path, progress: bool) -> dict:
-    from .pipeline import PipelineConfig, ScanRecognizer, detect_mission
-    from .slam import write_detections_jsonl
-    from .slam.rundir import DETECTIONS
+def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetries: dict | None = None):
+    """The mission through :func:`semslam.run.run_stream` (the path of ``semslam run``): every scan recognised and
+    scored against the simulator's truth as it passes (a separate pass: the estimate never sees it), every mode in
+    one pass; detections.jsonl, recognition.json, the Fig. 3 scan and each mode's run directory written."""
+    from ._progress import progress_steps
+    from .pipeline import PipelineConfig, ScanRecognizer
+    from .run import open_dive, run_stream
+    from .simulation.truth_slam import builtin_symmetries
+    from .slam import write_detections_jsonl, write_run
+    from .slam.rundir import DETECTIONS, mode_dir
 
     pipe_cfg = PipelineConfig(descriptor=cfg.descriptor, classifier=cfg.classifier)
     recognizer = ScanRecognizer(db, pipe_cfg, seed=cfg.seed)
     recognizer.warm_up()
     records: list[dict] = []
     best_scan: list = [-1, None]
+    with progress_steps(progress, len(mission.scans), "recognise", "scan") as step:
+        def score(msg, kept, stats, result) -> None:  # the separate pass against the simulator's ground truth
+            rec = mission.scan_record(msg.scan_id)
+            records.extend(score_scan(mission, rec, msg.cloud, result, db))
+            if len(result.detections) > best_scan[0]:
+                best_scan[:] = [len(result.detections), (rec.scan_id, msg.cloud, result)]
+            step()
 
-    def score(rec, cloud, result) -> None:  # the separate pass against the simulator's ground truth
-        records.extend(score_scan(mission, rec, cloud, result, db))
-        if len(result.detections) > best_scan[0]:
-            best_scan[:] = [len(result.detections), (rec.scan_id, cloud, result)]
-
-    found = detect_mission(mission, recognizer, seed=cfg.seed, keep_unreliable=cfg.use_unreliable,
-                           progress=progress, on_scan=score)
+        symmetries = builtin_symmetries() if symmetries is None else symmetries
+        found = run_stream(open_dive(mission), modes=tuple(cfg.modes), recognizer=recognizer, symmetries=symmetries,
+                           seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score)
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})
     if best_scan[1] is not None:
         _write_fig3_data(out / "fig3_scan.npz", *best_scan[1])
-    return {"detections_by_scan": found.detections_by_scan, "summary": summary, "pipeline_config": pipe_cfg.to_dict()}
+    for mode, res in found.results.items():
+        write_run(res, mode_dir(out, mode))
+    rec_out = {"detections_by_scan": found.detections_by_scan, "summary": summary,
+               "pipeline_config": pipe_cfg.to_dict()}
+    return rec_out, found.results
 
 
 def _write_fig3_data(path: Path, scan_id: int, cloud, result) -> None:
@@ -249,20 +260,6 @@ def _write_fig3_data(path: Path, scan_id: int, cloud, result) -> None:
     with atomic_open(path, "wb") as fh:
         np.savez(fh, scan_id=scan_id, points_xyz_m=cloud.points_xyz_m.astype(np.float32), cluster=cluster_of_point,
                  labels=labels, T_scanner_object=poses)
-
-
-def _run_slam_modes(mission, detections_by_scan: dict, cfg: DemoConfig, out: Path, symmetries: dict | None = None) -> dict:
-    from .simulation.truth_slam import builtin_symmetries
-    from .slam import run_slam, write_run
-    from .slam.rundir import mode_dir
-
-    results = {}
-    symmetries = builtin_symmetries() if symmetries is None else symmetries
-    for mode in cfg.modes:
-        res = run_slam(mission, detections_by_scan, mode=mode, symmetries=symmetries)
-        write_run(res, mode_dir(out, mode))
-        results[mode] = res
-    return results
 
 
 def _write_consensus(out: Path, mission, detections_by_scan: dict, pose_result) -> None:
