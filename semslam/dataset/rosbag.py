@@ -43,7 +43,7 @@ import numpy as np
 
 from .._progress import Progress, progress_steps
 from .._tables import read_table
-from ..errors import BagError, DatasetError
+from ..errors import BagError, DatasetError, SemslamError
 from ..limits import check as check_limit
 from .vehicle import VehicleDescription
 
@@ -222,8 +222,15 @@ class BagDecoder:
                            error=BagError)
 
 
+#: a header stamp later than its bag receive time by more than this is outside the dive (a message cannot be recorded
+#: before it was stamped; allows this much clock offset between the sensor and the recorder) (s)
+STAMP_AHEAD_LIMIT_S = 2.0
+#: a header stamp earlier than the bag's first receive time by more than this is outside the dive (s)
+STAMP_BEFORE_START_LIMIT_S = 60.0
+
+
 def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
-               time_origin_ns: list | None = None) -> Iterator[tuple[float, str, Any]]:
+               time_origin_ns: list | None = None, *, on_damage: str = "raise") -> Iterator[tuple[float, str, Any]]:
     """The mapped topics' messages in bag order as ``(stamp_s, kind, payload)``: ``attitude`` -> rpy (3,),
     ``dvl`` -> (velocity (3,) body FRD, valid, beam ranges or None), ``depth`` -> depth_m, ``scan`` ->
     :class:`~semslam.io.ros.PointCloud2Data`, ``fix`` -> (latitude_deg, longitude_deg, height_m, covariance
@@ -233,7 +240,12 @@ def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
     Stamps are seconds from a time origin: the whole second at or before the bag's first message, whatever its
     topic (integer
     nanoseconds until then, so that float64 keeps sub-microsecond resolution on epoch times); it is stored into
-    ``time_origin_ns`` (a one-element list) when given."""
+    ``time_origin_ns`` (a one-element list) when given.
+
+    ``on_damage="count"``: damaged records (see :meth:`semslam.io.ros.Bag.messages`) and messages stamped outside
+    the dive (a header stamp more than :data:`STAMP_AHEAD_LIMIT_S` after its receive time, or more than
+    :data:`STAMP_BEFORE_START_LIMIT_S` before the bag's start) are counted in ``bag.damage`` per topic and skipped;
+    ``"raise"``: a BagError."""
     from ..io.ros import decode_pointcloud2
 
     kinds = {}
@@ -252,26 +264,54 @@ def stream_bag(bag, topic_map: TopicMap, vehicle: VehicleDescription,
     origin = None if start is None else start - start % 1_000_000_000
     if origin is not None and time_origin_ns is not None:
         time_origin_ns[:] = [origin]
-    for m in bag.messages(list(kinds)):
+    damage = getattr(bag, "damage", None) if on_damage == "count" else None
+    if damage is not None:
+        damage.setdefault("invalid", {})
+    decoded: dict[str, int] = {}
+    for m in bag.messages(list(kinds), **({"on_damage": on_damage} if on_damage != "raise" else {})):
         kind, msgtype = kinds[m.topic]
         ns = _stamp_ns(m.msg, m.stamp_ns)
+        where = ("stamp_ahead" if ns - m.stamp_ns > STAMP_AHEAD_LIMIT_S * 1e9 else "stamp_before_start"
+                 if start is not None and ns < start - STAMP_BEFORE_START_LIMIT_S * 1e9 else None)
+        if where is not None:
+            if damage is None:
+                raise BagError(f"Bag '{getattr(bag, 'path', '?')}': topic '{m.topic}' has a message stamped "
+                               f"{ns} ns, outside the dive (received at {m.stamp_ns} ns, the bag starts at {start} "
+                               f"ns).")
+            damage[where][m.topic] = damage[where].get(m.topic, 0) + 1
+            continue
         if origin is None:
             origin = ns - ns % 1_000_000_000
             if time_origin_ns is not None:
                 time_origin_ns[:] = [origin]
         t = (ns - origin) / 1e9  # a division: correctly rounded (whole seconds stay exact)
-        if kind == "attitude":
-            rpy = dec.attitude(m.msg)
-            if np.isfinite(rpy).all():
-                yield t, "attitude", rpy
-        elif kind == "dvl":
-            yield t, "dvl", dec.dvl(m.msg, msgtype)
-        elif kind == "depth":
-            yield t, "depth", dec.depth(m.msg, msgtype)
-        elif kind in ("gps", "usbl"):
-            yield t, "fix", navsatfix_ne(m.msg) + (kind,)
-        else:
-            yield t, "scan", decode_pointcloud2(m.msg, source=f"topic {m.topic}")
+        try:
+            if kind == "attitude":
+                rpy = dec.attitude(m.msg)
+                item = (t, "attitude", rpy) if np.isfinite(rpy).all() else None
+            elif kind == "dvl":
+                item = (t, "dvl", dec.dvl(m.msg, msgtype))
+            elif kind == "depth":
+                item = (t, "depth", dec.depth(m.msg, msgtype))
+            elif kind in ("gps", "usbl"):
+                item = (t, "fix", navsatfix_ne(m.msg) + (kind,))
+            else:
+                pc = decode_pointcloud2(m.msg, source=f"topic {m.topic}")
+                bad = 0 if pc.time_offset_s is None else int((~np.isfinite(pc.time_offset_s)).sum())
+                if bad:  # its stamp (the last point's) would be NaN
+                    raise BagError(f"The scan topic {m.topic!r}: a message at {ns} ns has {bad} of "
+                                   f"{len(pc.time_offset_s)} per-point times that are not finite.")
+                item = (t, "scan", pc)
+        except SemslamError as err:  # a value out of its plausible range, a payload that does not parse
+            # counted as damage; the first messages of a topic all failing is a systematic error: raised
+            if damage is None or (not decoded.get(m.topic) and damage["invalid"].get(m.topic, 0) + 1 >= 20):
+                raise
+            damage["invalid"][m.topic] = damage["invalid"].get(m.topic, 0) + 1
+            damage.setdefault("first_error", {}).setdefault(m.topic, str(err))
+            continue
+        decoded[m.topic] = decoded.get(m.topic, 0) + 1
+        if item is not None:
+            yield item
 
 
 def navsatfix_ne(msg) -> tuple[float, float, float, np.ndarray]:
@@ -432,6 +472,7 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-__all__ = ["TopicMap", "read_topic_map", "suggest_topic_map", "stream_bag", "export_bag", "BagDecoder", "FIX_TYPES",
+__all__ = ["TopicMap", "read_topic_map", "suggest_topic_map", "stream_bag", "STAMP_AHEAD_LIMIT_S",
+           "STAMP_BEFORE_START_LIMIT_S", "export_bag", "BagDecoder", "FIX_TYPES",
            "navsatfix_ne",
            "SCAN_TYPES", "ATTITUDE_TYPES", "TWIST_TYPES", "DVL_TYPES", "DEPTH_TYPES"]

@@ -34,13 +34,14 @@ _G = 9.80665
 
 def topic_map_of(dataset: Dataset) -> TopicMap:
     """The topic map of the bag :func:`write_bag` writes for ``dataset``: :data:`SEMSLAM_TOPICS`, plus the GPS and
-    USBL topics and the geodetic origin when the dataset has position fixes."""
+    USBL topics and the geodetic origin when the dataset has position fixes; no scans topic without scans."""
     from dataclasses import replace
 
     f = dataset.fixes
+    base = SEMSLAM_TOPICS if dataset.scans else replace(SEMSLAM_TOPICS, scans=None)  # the bag has no such topic
     if f is None:
-        return SEMSLAM_TOPICS
-    return replace(SEMSLAM_TOPICS, gps="/semslam/gps" if "gps" in f.source else None,
+        return base
+    return replace(base, gps="/semslam/gps" if "gps" in f.source else None,
                    usbl="/semslam/usbl" if "usbl" in f.source else None,
                    origin=None if dataset.geodetic_origin is None else dataset.geodetic_origin.as_dict())
 

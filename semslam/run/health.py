@@ -94,6 +94,9 @@ def health_verdict(result, *, counts: dict | None = None, limits: HealthLimits |
             d[k] = d.get(k, 0) + n
         if d:
             v.add("stream", "warning", f"{sum(d.values())} {what}: {d}", **{key: d})
+    from .damage import add_damage_checks
+
+    add_damage_checks(v, counts)  # damaged recordings and stamps out of order, per topic (semslam.run.damage)
     skipped = m.get("skipped_beyond_attitude", 0)
     if skipped:
         v.add("stream", "warning", f"{skipped} messages beyond the last attitude sample, skipped")

@@ -221,9 +221,11 @@ def _bag_messages(bag, tmap, dive: Dive) -> Iterator:
     """The bag's mapped messages as typed messages in stamp order (a reorder window of :data:`REORDER_WINDOW_S`);
     closes the bag at the end."""
     from ..dataset.rosbag import stream_bag
+    from .damage import damaged_per_topic
 
     counts = dive.counts
     late: dict = counts.setdefault("late_dropped", {})
+    counts["damage"] = bag.damage  # damaged records per topic, filled as the bag is read (semslam.run.damage)
     heap: list = []
     seq = 0
     released = -math.inf
@@ -232,7 +234,7 @@ def _bag_messages(bag, tmap, dive: Dive) -> Iterator:
     scan_id = 0
     geo = dive.geodetic_origin
     try:
-        for t, kind, payload in stream_bag(bag, tmap, dive.vehicle, origin_ns):
+        for t, kind, payload in stream_bag(bag, tmap, dive.vehicle, origin_ns, on_damage="count"):
             dive.metadata["time_origin_ns"] = origin_ns[0]
             if kind == "scan":
                 if not payload.points_xyz_m.shape[0]:
@@ -269,6 +271,7 @@ def _bag_messages(bag, tmap, dive: Dive) -> Iterator:
             counts[item[3].kind] = counts.get(item[3].kind, 0) + 1
             yield item[3]
     finally:
+        counts["damaged"] = damaged_per_topic(bag.damage)
         bag.close()
 
 

@@ -15,6 +15,7 @@ from Iron on), else from ``.msg`` files given with ``msg_dirs`` (``--msg-dir``),
 from __future__ import annotations
 
 import contextlib
+import heapq
 import os
 import stat
 from dataclasses import dataclass
@@ -24,7 +25,7 @@ from typing import Any, Iterable, Iterator, NamedTuple, Sequence
 from ...errors import BagError
 from ._types import _one_line, build_typestore, load_msg_dirs, missing_types, normalize_msgtype
 
-__all__ = ["Bag", "BagMessage", "TopicRecord", "open_bag"]
+__all__ = ["Bag", "BagMessage", "TopicRecord", "new_damage", "open_bag"]
 
 _ROS2_SUFFIXES = (".mcap", ".db3")
 
@@ -114,6 +115,8 @@ class Bag:
         self._reader = reader
         self._store: Any = None
         self._records: list[TopicRecord] | None = None
+        #: records lost to damage, filled by ``messages(on_damage="count")`` (see :meth:`messages`)
+        self.damage: dict = new_damage()
 
     # -- life cycle -------------------------------------------------------------------------------------
     def close(self) -> None:
@@ -174,8 +177,8 @@ class Bag:
             with _boundary(self.path, "cannot be scanned (corrupt or truncated?)"):
                 if indexes is not None:
                     stamps = ((c.topic, e.time) for c in self._connections for e in indexes.get(c.id, ()))
-                else:
-                    stamps = ((c.topic, t) for c, t, _ in reader.messages())
+                else:  # damaged chunks skipped here: messages(on_damage=...) decides whether they are fatal
+                    stamps = ((c.topic, t) for c, t, _ in self._raw(reader, self._connections, new_damage()))
                 for topic, t in stamps:
                     first[topic] = min(first.get(topic, t), t)
                     last[topic] = max(last.get(topic, t), t)
@@ -209,15 +212,24 @@ class Bag:
                 self._store = build_typestore(self._connections, self._user_types, ros1=self.is_ros1)
         return self._store
 
-    def messages(self, topics: str | Iterable[str] | None = None) -> Iterator[BagMessage]:
+    def messages(self, topics: str | Iterable[str] | None = None, *, on_damage: str = "raise") -> Iterator[BagMessage]:
         """Deserialized messages of ``topics`` (default all), in bag receive-time order, streamed.
+
+        ``on_damage="count"``: a record that cannot be decoded, a chunk that cannot be read (MCAP, ROS 1: the
+        reader goes on with the next one) and, at the end, the messages the bag's index declares but that were
+        never read (a zeroed block, a stream cut short) are counted per topic in :attr:`damage` and skipped;
+        ``"raise"`` (default): the first one is a BagError.
 
         Raises
         ------
         BagError
             A requested topic is missing; a type has no definition (pass its ``.msg`` file's directory with
-            ``msg_dirs`` / ``--msg-dir``); the data is corrupt or truncated (raised when reached).
+            ``msg_dirs`` / ``--msg-dir``); the data is corrupt or truncated (raised when reached; with
+            ``on_damage="count"`` only when every one of a topic's first records fails to decode: a wrong
+            definition, not damage).
         """
+        if on_damage not in ("raise", "count"):
+            raise BagError(f"Bag '{self.path}': on_damage must be 'raise' or 'count'. Got {on_damage!r} instead.")
         reader = self._open_reader()
         wanted = [topics] if isinstance(topics, str) else (None if topics is None else list(topics))
         if wanted is not None:
@@ -234,6 +246,8 @@ class Bag:
                 raise BagError(f"Bag '{self.path}': topic '{conn.topic}' has message type '{conn.msgtype}' with no "
                                f"definition for {', '.join(repr(m) for m in missing)} (the bag does not embed it): "
                                f"pass the directory of its PKG/msg/NAME.msg file with --msg-dir (msg_dirs=...).")
+        if on_damage == "count":
+            return self._stream_counting(reader, conns, store)
         return self._stream(reader, conns, store)
 
     def _stream(self, reader: Any, conns: list[Any], store: Any) -> Iterator[BagMessage]:
@@ -241,17 +255,180 @@ class Bag:
         with _boundary(self.path, "cannot be read"):
             raw_messages = reader.messages(connections=conns)
         n_read = 0
+        per_topic: dict[str, int] = {}
         while True:
             with _boundary(self.path, f"is corrupt or truncated after {n_read} message(s)"):
                 try:
                     conn, stamp_ns, raw = next(raw_messages)
                 except StopIteration:
+                    self._check_all_read(conns, per_topic)
                     return
+            per_topic[conn.topic] = per_topic.get(conn.topic, 0) + 1
             with _boundary(self.path, f"topic '{conn.topic}' message at {stamp_ns} ns cannot be decoded as "
                                       f"{conn.msgtype}"):
                 msg = deserialize(raw, conn.msgtype)
             n_read += 1
             yield BagMessage(conn.topic, conn.msgtype, int(stamp_ns), msg)
+
+    def _check_all_read(self, conns: list[Any], per_topic: dict[str, int]) -> None:
+        """Every message the bag's index declares was read: else a BagError (a zeroed block inside an MCAP chunk
+        loses messages without an error from the reader)."""
+        declared: dict[str, int] = {}
+        for c in conns:
+            declared[c.topic] = declared.get(c.topic, 0) + max(int(c.msgcount or 0), 0)
+        for topic, n in declared.items():
+            if per_topic.get(topic, 0) < n:
+                raise BagError(f"Bag '{self.path}': is damaged: its index declares {n} message(s) on topic '{topic}', "
+                               f"only {per_topic.get(topic, 0)} could be read.")
+
+    def _stream_counting(self, reader: Any, conns: list[Any], store: Any) -> Iterator[BagMessage]:
+        deserialize = store.deserialize_ros1 if self.is_ros1 else store.deserialize_cdr
+        dmg = self.damage
+        declared: dict[str, int] = {}
+        for c in conns:
+            declared[c.topic] = declared.get(c.topic, 0) + max(int(c.msgcount or 0), 0)
+        read: dict[str, int] = dict.fromkeys(declared, 0)
+        ok: dict[str, int] = dict.fromkeys(declared, 0)
+        for topic, n in declared.items():
+            dmg["declared"][topic] = dmg["declared"].get(topic, 0) + n
+        before = dict(dmg["undecodable"])  # records the raw reader skipped are counted there, not read
+        failed: dict[str, int] = {}
+        raw_messages = self._raw(reader, conns, dmg)
+        try:
+            while True:
+                try:
+                    conn, stamp_ns, raw = next(raw_messages)
+                except StopIteration:
+                    break
+                except Exception as err:  # a reader that cannot go on: the rest is unread, counted below
+                    dmg["stream_ended"] = f"{type(err).__name__}: {_one_line(err)}"
+                    break
+                read[conn.topic] = read.get(conn.topic, 0) + 1
+                try:
+                    msg = deserialize(raw, conn.msgtype)
+                    stamp = int(stamp_ns)
+                except Exception as err:
+                    _bump(dmg["undecodable"], conn.topic)
+                    _bump(failed, conn.topic)
+                    if not ok.get(conn.topic) and dmg["undecodable"][conn.topic] >= _ALL_BAD_AFTER:
+                        raise BagError(f"Bag '{self.path}': the first {_ALL_BAD_AFTER} messages of topic "
+                                       f"'{conn.topic}' cannot be decoded as {conn.msgtype} ({type(err).__name__}: "
+                                       f"{_one_line(err)}): a wrong message definition, not damage.") from None
+                    continue
+                ok[conn.topic] = ok.get(conn.topic, 0) + 1
+                yield BagMessage(conn.topic, conn.msgtype, stamp, msg)
+        finally:
+            for topic, n in declared.items():  # declared by the index, never read: a zeroed block, a cut stream
+                seen = read.get(topic, 0) + dmg["undecodable"].get(topic, 0) - before.get(topic, 0) \
+                    - failed.get(topic, 0)
+                if n > seen:
+                    _bump(dmg["unread"], topic, n - seen)
+
+    def _raw(self, reader: Any, conns: list[Any], dmg: dict) -> Iterator[tuple[Any, int, bytes]]:
+        """``(connection, receive stamp ns, raw bytes)`` of ``conns``: a damaged chunk of an indexed MCAP file or a
+        damaged record of a ROS 1 bag is counted in ``dmg`` and skipped; other storages as rosbags reads them."""
+        if self.is_ros1 and hasattr(reader, "indexes") and hasattr(reader, "chunks"):
+            return _ros1_raw(reader, conns, dmg)
+        st = getattr(reader, "storage", None)
+        if hasattr(st, "storages"):  # a bag directory (files compressed as a whole or per message: not guarded)
+            storages, mode = st.storages, getattr(st.metadata, "compression_mode", None)
+        else:  # a bare .mcap / .db3 file
+            storages, mode = [st], None
+        mcap = None
+        if storages is not None and len(storages) == 1 and mode in ("", "none", None):
+            st = storages[0]
+            if type(st).__name__ == "McapReader" and getattr(st, "chunks", None):
+                mcap = st
+        if mcap is None:
+            return reader.messages(connections=conns)
+        return _mcap_raw(mcap, conns, dmg)
+
+
+#: with ``on_damage="count"``, this many undecodable messages of a topic before any decoded one is a wrong
+#: definition (a BagError), not damage
+_ALL_BAD_AFTER = 20
+
+
+def new_damage() -> dict:
+    """An empty damage record (see :meth:`Bag.messages`): per topic ``declared`` (the index's counts),
+    ``undecodable``, ``unread`` (declared but never read), ``invalid``, ``stamp_ahead`` / ``stamp_before_start``
+    (filled by
+    :func:`semslam.dataset.rosbag.stream_bag`), and ``chunks_skipped``."""
+    return {"declared": {}, "undecodable": {}, "invalid": {}, "unread": {}, "stamp_ahead": {}, "stamp_before_start": {},
+            "chunks_skipped": 0}
+
+
+def _bump(d: dict, key: str, n: int = 1) -> None:
+    d[key] = d.get(key, 0) + n
+
+
+def _mcap_raw(storage: Any, conns: list[Any], dmg: dict) -> Iterator[tuple[Any, int, bytes]]:
+    """rosbags' indexed MCAP read (one chunk at a time, merged in time order), each chunk guarded: one that cannot
+    be read or decompressed is counted and skipped, the others are read."""
+    from rosbags.rosbag2.storage_mcap import msgsrc
+
+    by_key = {(c.topic, c.msgtype): c for c in conns}
+    channel_map = {sc.id: by_key[(sc.topic, sc.msgtype)] for sc in storage.connections
+                   if (sc.topic, sc.msgtype) in by_key}
+
+    def guarded(chunk):
+        try:
+            yield from msgsrc(chunk, channel_map, chunk.message_start_time, chunk.message_end_time + 1, storage.bio)
+        except Exception:
+            dmg["chunks_skipped"] += 1
+
+    sources = [guarded(x) for x in storage.chunks if any(x.channel_count.get(cid, 0) for cid in channel_map)]
+    for timestamp, offset, connection, data in heapq.merge(*sources, key=lambda m: m[0]):
+        if offset and connection is not None and data is not None:
+            yield connection, timestamp, data
+
+
+def _ros1_raw(reader: Any, conns: list[Any], dmg: dict) -> Iterator[tuple[Any, int, bytes]]:
+    """rosbags' ROS 1 read (index entries merged in time order, one decompressed chunk at a time), each record
+    guarded: a chunk that cannot be decompressed or a record that is not the message its index names is counted
+    and skipped."""
+    from rosbags.rosbag1.reader import Header, RecordType, read_bytes, read_uint32
+
+    bio = reader.bio
+    current: tuple[int | None, Any] = (None, None)
+    bad_chunks: set[int] = set()
+    by_id = {c.id: c for c in conns}
+    tagged = [[(e.time, e.chunk_pos, e.offset, c.id) for e in reader.indexes.get(c.id, ())] for c in conns]
+    for time, chunk_pos, offset, cid in heapq.merge(*tagged):
+        conn = by_id[cid]
+        try:
+            if chunk_pos in bad_chunks:
+                raise ValueError("chunk skipped")
+            if current[0] != chunk_pos:
+                try:
+                    head = reader.chunks[chunk_pos]
+                    bio.seek(head.datapos)
+                    current = (chunk_pos, _BytesIO(head.decompressor(read_bytes(bio, head.datasize))))
+                except Exception:
+                    bad_chunks.add(chunk_pos)
+                    dmg["chunks_skipped"] += 1
+                    raise
+            chunk = current[1]
+            chunk.seek(offset)
+            while True:
+                header = Header.read(chunk)
+                op = header.get_uint8("op")
+                if op != RecordType.CONNECTION:
+                    break
+                chunk.seek(read_uint32(chunk), os.SEEK_CUR)
+            if op != RecordType.MSGDATA or header.get_uint32("conn") != cid or header.get_time("time") != time:
+                raise ValueError("not the message the index names")
+            data = read_bytes(chunk, read_uint32(chunk))
+        except Exception:
+            _bump(dmg["undecodable"], conn.topic)
+            continue
+        yield conn, time, data
+
+
+def _BytesIO(data: bytes) -> Any:
+    from io import BytesIO
+
+    return BytesIO(data)
 
 
 def open_bag(path: str | os.PathLike, *, msg_dirs: Iterable[str | os.PathLike] = ()) -> Bag:
