@@ -5,6 +5,7 @@ recorded with `rosbag record` and read back with semslam's bag reader, compared 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import subprocess
 import sys
 import time
@@ -86,6 +87,14 @@ def _offline(dive, tmp_path):
                           for r in lms], "payload": payload, "dir": out}
 
 
+def _recorder() -> list[str]:
+    """Debian's C++ recorder itself (one process: one SIGINT closes its bag), else the ``rosbag record`` wrapper
+    (whose child, signalled with its group and again by the wrapper, left ``NAME.bag.active`` unclosed in 2 of ~8
+    loaded runs)."""
+    binary = Path("/usr/lib/rosbag/record")
+    return [str(binary)] if binary.is_file() else ["rosbag", "record"]
+
+
 def test_node_on_a_real_roscore_matches_the_offline_run(dive, tmp_path):
     """rosbag play -> node -> rosbag record: every odometry within 5 cm of the offline filter at its stamp, one
     ellipsoid per mapped landmark where the offline map has it, diagnostics OK; at SIGINT the run directory holds
@@ -105,7 +114,7 @@ def test_node_on_a_real_roscore_matches_the_offline_run(dive, tmp_path):
             topics = ["/semslam/odometry", "/semslam/odometry/filtered", "/semslam/landmarks", "/diagnostics",
                       "/semslam/path", "/tf", "/semslam/detections"]
             # a loaded machine may need a while to close the bag: SIGINT, then up to 60 s to rename out.bag.active
-            with started(["rosbag", "record", "-O", str(tmp_path / "out.bag"), *topics], env,
+            with started([*_recorder(), "-O", str(tmp_path / "out.bag"), *topics], env,
                          tmp_path / "record.log", stop_timeout_s=60.0) as rec:
                 _wait(lambda: _subscribed(uri, "/semslam/odometry"), 30, "rosbag record", tmp_path / "record.log")
                 play = subprocess.run(["rosbag", "play", "-q", "-d", "1", "-r", "1.5", str(dive["bag"])], env=env,
