@@ -189,28 +189,26 @@ def _closest_equivalent_difference(T0: np.ndarray, Tk: np.ndarray, symmetry) -> 
     if symmetry is None or symmetry.kind == "none":
         return tangent_difference(T0, Tk)
     if symmetry.kind == "discrete":
-        best = None
-        for G in symmetry.group_rotations():
-            Tg = Tk.copy()
-            Tg[:3, :3] = G.T @ Tk[:3, :3]
-            Tg[:3, 3] = G.T @ Tk[:3, 3]
-            d = tangent_difference(T0, Tg)
-            if best is None or np.linalg.norm(d[3:]) < np.linalg.norm(best[3:]):
-                best = d
-        return best
+        return _closest_equivalent(T0, Tk, symmetry.group_rotations())
     # continuous: the rotation about the axis (through the object origin) is unobservable
     a = np.asarray(symmetry.axis_object, dtype=float)
     a = a / np.linalg.norm(a)
+    best = _closest_equivalent(T0, Tk, (Rotation.from_rotvec(th * a).as_matrix()
+                                        for th in np.linspace(-np.pi, np.pi, 72, endpoint=False)))
+    best[3:] -= (best[3:] @ a) * a
+    return best
+
+
+def _closest_equivalent(T0: np.ndarray, Tk: np.ndarray, rotations) -> np.ndarray:
+    """:func:`tangent_difference` of ``T0`` to ``G^T Tk`` over the rotations ``G``, the one of smallest rotation."""
     best = None
-    for th in np.linspace(-np.pi, np.pi, 72, endpoint=False):
-        G = Rotation.from_rotvec(th * a).as_matrix()
+    for G in rotations:
         Tg = Tk.copy()
         Tg[:3, :3] = G.T @ Tk[:3, :3]
         Tg[:3, 3] = G.T @ Tk[:3, 3]
         d = tangent_difference(T0, Tg)
         if best is None or np.linalg.norm(d[3:]) < np.linalg.norm(best[3:]):
             best = d
-    best[3:] -= (best[3:] @ a) * a
     return best
 
 
