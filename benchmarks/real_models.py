@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import shutil
 import tempfile
 import time
 import warnings
@@ -72,9 +73,9 @@ def write_models_folder(dest: Path, classes: list[str] | None = None, *, models_
             alt, alt_unit = ALTERNATIVE_FORMATS[label]
             if _readable(models_dir / alt, alt_unit, sym, read_models):
                 fname, unit = alt, alt_unit
-        link = dest / fname
-        if not link.exists():
-            link.symlink_to(models_dir / fname)
+        copy = dest / fname
+        if not copy.exists():  # a copy: semslam reads no model through a link leading out of the models folder
+            shutil.copyfile(models_dir / fname, copy)
         lines.append(f'[{label}]\nfile = "{fname}"\nunit = "{unit}"\nsymmetry = "{sym}"\n')
         used[label] = fname
     (dest / "models.toml").write_text("\n".join(lines))
@@ -89,7 +90,7 @@ def _readable(path: Path, unit: str, sym: str, read_models) -> bool:
         return False
     with tempfile.TemporaryDirectory(prefix="semslam_probe_") as tmp:
         probe = Path(tmp)
-        (probe / path.name).symlink_to(path)
+        shutil.copyfile(path, probe / path.name)
         (probe / "models.toml").write_text(f'[probe]\nfile = "{path.name}"\nunit = "{unit}"\nsymmetry = "{sym}"\n')
         try:
             with warnings.catch_warnings():

@@ -208,3 +208,20 @@ def test_T_mesh_object_sets_the_canonical_frame(tmp_path):
     model = read_models(d)["box"]
     np.testing.assert_allclose(model.size_xyz_m, [0.05, 0.03, 0.02], atol=1e-9)
     np.testing.assert_allclose(model.mesh.bounds.mean(axis=0), 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("how", ["absolute", "parent", "symlink"])
+def test_a_model_file_outside_the_models_folder_is_refused(tmp_path, how):
+    """models.toml names a file outside its folder (an absolute path, ``../``, a symbolic link leading out): refused
+    with one line naming the key, never read."""
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(outside / "box.stl")
+    folder = tmp_path / "models"
+    folder.mkdir()
+    name = {"absolute": str(outside / "box.stl"), "parent": "../elsewhere/box.stl", "symlink": "link.stl"}[how]
+    if how == "symlink":
+        (folder / "link.stl").symlink_to(outside / "box.stl")
+    (folder / "models.toml").write_text(f'[box]\nfile = "{name}"\nunit = "m"\n')
+    with pytest.raises(DatabaseError, match=r"'file'.*(inside|leads out of) the models folder"):
+        read_models(folder)

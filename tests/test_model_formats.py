@@ -9,6 +9,8 @@ model.sdf, as its README says); ``blind_flange_4in_cl150_mm.step`` (millimetres)
 
 from __future__ import annotations
 
+import shutil
+
 import sys
 import warnings
 
@@ -38,7 +40,8 @@ def shared_models(shared_dir):
 
 
 def _folder(tmp_path, toml: str, files: dict[str, object] | None = None):
-    """A models folder: ``files`` (name -> trimesh object, bytes, str or a path to link) and models.toml."""
+    """A models folder: ``files`` (name -> trimesh object, bytes, str or a path to copy: a link leading out of the
+    folder is refused) and models.toml."""
     d = tmp_path / "models"
     d.mkdir(exist_ok=True)
     for name, content in (files or {}).items():
@@ -50,7 +53,7 @@ def _folder(tmp_path, toml: str, files: dict[str, object] | None = None):
         elif isinstance(content, str):
             target.write_text(content, encoding="utf-8")
         else:
-            target.symlink_to(content)
+            shutil.copyfile(content, target)
     (d / "models.toml").write_text(toml, encoding="utf-8")
     return d
 

@@ -182,6 +182,25 @@ def _has_module(name: str) -> bool:
         return False
 
 
+def _inside(root: Path, name: str, where: str) -> Path:
+    """``root / name``, refused unless it is a file inside the models folder once every link is resolved (an
+    absolute path, ``../``, or a symbolic link leading out is another folder's file: never read on a models.toml's
+    word)."""
+    p = Path(name)
+    if p.is_absolute() or ".." in p.parts:
+        raise DatabaseError(f"{where}: 'file' must be a path inside the models folder {str(root)!r}. Got {name!r} "
+                            "instead.")
+    full = root / p
+    try:
+        inside = full.resolve(strict=False).is_relative_to(root.resolve(strict=False))
+    except (OSError, RuntimeError):
+        inside = False
+    if not inside:
+        raise DatabaseError(f"{where}: 'file' {name!r} leads out of the models folder {str(root)!r} (a symbolic "
+                            "link?): copy the model into the folder.")
+    return full
+
+
 def step_length_unit_m(path: str | Path) -> float | None:
     """Metres per length unit of the STEP file ``path`` (its first ``LENGTH_UNIT``: an ``SI_UNIT`` of the metre
     with its prefix, or a ``CONVERSION_BASED_UNIT`` such as ``'INCH'``), or None when it states none readable."""
@@ -382,7 +401,7 @@ def read_models(models_dir: str | Path) -> dict[str, ObjectModel]:
         T_mesh_object = None
         if "T_mesh_object" in entry:
             T_mesh_object = _transform(entry["T_mesh_object"], f"{where}: 'T_mesh_object'")
-        mesh_path = root / entry["file"]
+        mesh_path = _inside(root, entry["file"], where)
         mesh, unit_text, number_m = _load_mesh(mesh_path, unit, where)
         diagonal = float(np.linalg.norm(np.ptp(mesh.bounds, axis=0)))
         if not MIN_DIAGONAL_M <= diagonal <= MAX_DIAGONAL_M:
