@@ -184,3 +184,22 @@ def test_an_output_equal_to_inside_or_holding_an_input_is_refused(world, capsys)
     for argv, needle in cases:
         _refused(argv, capsys, needle)
     assert _snapshot(inp) == before
+
+
+def test_montecarlo_out_follows_the_ownership_rule(tmp_path, capsys):
+    """``montecarlo --out`` writes a marked directory, refuses a foreign non-empty folder before the work, and
+    replaces its own earlier output only with --overwrite."""
+    mc = ["montecarlo", "--runs", "1", "--mode", "dr", "--source", "synthetic", "--loops", "1", "--json"]
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    assert main([*mc, "--out", str(foreign)]) == 1
+    assert "cannot prove it wrote it" in capsys.readouterr().err
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"] and (foreign / "notes.txt").read_text() == "mine"
+    out = tmp_path / "mc"
+    assert main([*mc, "--out", str(out)]) == 0
+    assert is_owned(out, "montecarlo") and (out / "summary.json").is_file()
+    capsys.readouterr()
+    assert main([*mc, "--out", str(out)]) == 1           # an earlier Monte Carlo: only with --overwrite
+    assert "overwrite" in capsys.readouterr().err
+    assert main([*mc, "--out", str(out), "--overwrite"]) == 0

@@ -62,7 +62,9 @@ def register(subparsers, common) -> None:
                    help="standard deviation (m, per axis) of the start point of a dive without position fixes, "
                         "which defines its local frame (default: SlamConfig's, 0.001)")
     q.add_argument("--no-smooth", action="store_true", help="skip the RTS-smoothed trajectories")
-    q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves")
+    q.add_argument("--out", help="directory for summary.json, summary.md and ANEES curves (new, or an earlier Monte "
+                                 "Carlo of semslam's with --overwrite)")
+    q.add_argument("--overwrite", action="store_true", help="replace an earlier semslam Monte Carlo in --out")
     q.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="worker processes of a local Dask cluster (default 1: serial, in this process); same results")
     q.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler: tls://host:8786 "
@@ -165,6 +167,10 @@ def _run_montecarlo(args: argparse.Namespace) -> int:
     from ._output import emit
 
     modes = MODES if args.mode == "all" else (args.mode,)
+    if args.out:  # before the work: only an earlier Monte Carlo semslam's marker proves it wrote (semslam._outdir)
+        from .._outdir import check_output_dir
+
+        check_output_dir(args.out, overwrite=args.overwrite, kind="montecarlo")
     overrides: dict = {}
     if args.launch_sigma is not None:
         if not (args.launch_sigma > 0 and args.launch_sigma < float("inf")):
@@ -178,6 +184,9 @@ def _run_montecarlo(args: argparse.Namespace) -> int:
                          white_dvl=args.white_dvl, jobs=args.jobs, scheduler=args.scheduler,
                          config_overrides=overrides or None, backend=args.backend, surveyed=tuple(args.surveyed))
     if args.out:
-        write_montecarlo(res, args.out)
+        from .._outdir import staged_output_dir
+
+        with staged_output_dir(args.out, overwrite=args.overwrite, kind="montecarlo") as tmp:
+            write_montecarlo(res, tmp)
     emit(args, {"n_runs": res.n_runs, "summary": res.summary}, res.table)
     return 0
