@@ -147,8 +147,7 @@ def main() -> None:
                         dets = read_detections_jsonl(run / "detections.jsonl")
                     else:  # the same scans, the same detections (recognition is seeded): SLAM from the other start
                         dive = open_dive(bag, topics=topics, scans=False)
-                        out = run_stream(dive, modes=MODES, detections_by_scan=dets, symmetries=db.symmetries(),
-                                         truth=None)
+                        out = run_stream(dive, modes=MODES, detections_by_scan=dets, symmetries=db.symmetries())
                         payload = write_outcome(out, run, dive=dive, export=True)
                     dive = open_dive(bag, topics=topics)
                     next(iter(dive.messages()), None)  # the time origin is known after the first message

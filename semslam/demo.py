@@ -240,6 +240,9 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})
     if best_scan[1] is not None:
         _write_fig3_data(out / "fig3_scan.npz", *best_scan[1])
+    from .slam.evaluation import evaluate_results
+
+    found.results = evaluate_results(found.results, mission, symmetries)  # against the simulator's truth, after
     for mode, res in found.results.items():
         write_run(res, mode_dir(out, mode))
     rec_out = {"detections_by_scan": found.detections_by_scan, "summary": summary,

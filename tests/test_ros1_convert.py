@@ -213,8 +213,7 @@ def test_live_wiring_shuffled_within_the_window_gives_the_offline_trajectory(ros
     from ros1_helpers import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
-    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle, scans=False), modes=("dr",),
-                     truth=None).results["dr"]
+    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle, scans=False), modes=("dr",)).results["dr"]
     dec = LiveDecoder(tmap, vehicle)
     msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns)
             for t, ty, md5, d, raw, ns in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth])]
@@ -334,7 +333,7 @@ def test_live_fixes_and_a_prior_map_give_semslam_runs_result(tmp_path):
     assert origin_from == "the topic map" and len(survey) == 2
     dive = open_dive(bag, scans=False)
     adopt_survey_frame(dive, survey)
-    ref = run_stream(dive, modes=("position",), survey=survey, truth=None).results["position"]
+    ref = run_stream(dive, modes=("position",), survey=survey).results["position"]
 
     dec = LiveDecoder(tmap, vehicle)
     msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
@@ -400,8 +399,7 @@ def test_scans_slower_than_the_messages_still_give_semslam_runs_result(ros1_bag)
     from ros1_helpers import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
-    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("pose",), recognizer=_SlowRecognizer(),
-                     truth=None)
+    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("pose",), recognizer=_SlowRecognizer())
     dec = LiveDecoder(tmap, vehicle)
     msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
             in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans])]

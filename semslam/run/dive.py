@@ -47,6 +47,10 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
     outcome = run_stream(dive, modes=tuple(modes), recognizer=recognizer, config=cfg, symmetries=db.symmetries(),
                          backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
                          up_from_attitude=up_from_attitude)
+    # after the run: a mission directory's (or a dataset's) ground truth, when it has one, for the metrics only
+    from ..slam.evaluation import evaluate_results, load_reference
+
+    outcome.results = evaluate_results(outcome.results, load_reference(source), db.symmetries())
     return write_outcome(outcome, out, dive=dive, pipeline_config=recognizer.config, seed=seed, export=export)
 
 

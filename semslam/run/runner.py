@@ -15,7 +15,7 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -244,9 +244,9 @@ class Runner:
                 _feed(s, mode, kind, t, p)
 
     # ------------------------------------------------------------------ output
-    def finish(self, truth=None) -> RunOutcome:
-        """Process what is pending and return the :class:`RunOutcome`; with ``truth`` (a dataset holding the dive's
-        ground truth), each result is evaluated against it (after the run: the estimate never sees it)."""
+    def finish(self) -> RunOutcome:
+        """Process what is pending and return the :class:`RunOutcome` (no evaluation: that is
+        :func:`semslam.slam.evaluation.evaluate_results`, after the run, by whoever holds a reference)."""
         if self._finished:
             raise InputError("Runner.finish was already called.")
         self._finished = True
@@ -259,12 +259,7 @@ class Runner:
             results = {}
             with threadpool_limits(limits=1, user_api="blas"):
                 for mode, s in self.sessions.items():
-                    r = with_start(s.finish(), self.start)
-                    if truth is not None:
-                        from ..slam.evaluation import evaluate_run
-
-                        r = evaluate_run(r, truth, self.symmetries)
-                    results[mode] = r
+                    results[mode] = with_start(s.finish(), self.start)
         finally:
             if self._blas is not None:
                 self._blas.restore_original_limits()
@@ -291,15 +286,13 @@ def _feed(session, mode: str, kind: str, t: float, p) -> None:
         session.add_detections(t, p)
 
 
-def run_stream(dive, *, truth: Any = "auto", **runner_kw) -> RunOutcome:
-    """Every message of an opened dive (:func:`semslam.run.open_dive`) through a :class:`Runner`; evaluated
-    against the dive's ground truth when it has one (``truth="auto"``) or the given dataset."""
+def run_stream(dive, **runner_kw) -> RunOutcome:
+    """Every message of an opened dive (:func:`semslam.run.open_dive`) through a :class:`Runner`. Not evaluated:
+    :func:`semslam.slam.evaluation.evaluate_results` does that after the run, against a reference it loads."""
     runner = Runner(dive.vehicle, **runner_kw)
     for msg in dive.messages():
         runner.feed(msg)
-    if truth == "auto":
-        truth = dive.ground_truth()
-    out = runner.finish(truth=truth)
+    out = runner.finish()
     out.counts["source"] = dict(dive.counts)
     if dive.geodetic_origin is not None:
         for r in out.results.values():

@@ -9,7 +9,8 @@ Frames are never guessed. A bag is read with the topic map and the vehicle file 
 ``/tf_static``); where that is not enough (a twist DVL without a stated frame) it stops with one line that shows
 the suggested topic map.
 
-Ground truth is not part of the stream: :meth:`Dive.ground_truth` gives it to evaluation after a run.
+Ground truth is not part of a dive: evaluation reads it after a run, from the source itself
+(:func:`semslam.slam.evaluation.load_reference`).
 """
 
 from __future__ import annotations
@@ -46,7 +47,6 @@ class Dive:
     metadata: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
     _messages: Any = None
-    _truth: Any = None
 
     def messages(self) -> Iterator:
         """The dive's messages in stamp order (see :mod:`semslam.run.messages`); one pass."""
@@ -54,11 +54,6 @@ class Dive:
             raise InputError(f"The dive {self.name!r} was already read: open it again for another pass.")
         it, self._messages = self._messages, None
         return it
-
-    def ground_truth(self) -> Dataset | None:
-        """The dataset holding the dive's ground truth (trajectory, object poses), for evaluation after a run; None
-        for a recorded dive."""
-        return self._truth
 
 
 def open_dive(source: Any, *, topics: Any = None, vehicle: Any = None, msg_dirs=(), scans: bool = True) -> Dive:
@@ -133,11 +128,10 @@ def dataset_messages(ds: Dataset, scans: bool = True) -> Iterator:
 
 
 def _dataset_dive(ds: Dataset, *, name: str, kind: str, scans: bool = True) -> Dive:
-    truth = ds if ds.truth is not None or ds.objects else None
     meta = {"source": {"kind": kind, "path": name}}
     if "source" in ds.metadata:
         meta["recorded_from"] = ds.metadata["source"]
-    return Dive(ds.vehicle, name, kind, ds.geodetic_origin, meta, {}, dataset_messages(ds, scans), truth)
+    return Dive(ds.vehicle, name, kind, ds.geodetic_origin, meta, {}, dataset_messages(ds, scans))
 
 
 # ---------------------------------------------------------------------------------------------- bags
@@ -187,7 +181,7 @@ def _bag_dive(path: Path, topics: Any, vehicle: VehicleDescription | None, msg_d
         tmap = replace(tmap, scans=None)
     origin = GeodeticOrigin.from_dict(tmap.origin) if tmap.origin is not None else None
     dive = Dive(vehicle, str(path), "bag", origin, {"source": {"kind": "bag", "path": str(path), **used},
-                                                   "topics": tmap.to_toml()}, {}, None, None)
+                                                   "topics": tmap.to_toml()}, {}, None)
     dive._messages = _bag_messages(bag, tmap, dive)
     return dive
 

@@ -119,3 +119,29 @@ def ate_4dof(est_m: np.ndarray, truth_m: np.ndarray) -> float:
     R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     d = np.asarray(est_m, dtype=float) @ R.T + t - np.asarray(truth_m, dtype=float)
     return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def evaluate_results(results: dict, reference: Dataset | None, symmetries: dict[str, Symmetry] | None = None) -> dict:
+    """``{mode: SlamResult}`` evaluated against ``reference`` (a dataset holding ground truth), after the run; left as
+    they are without one."""
+    if reference is None:
+        return dict(results)
+    return {mode: evaluate_run(r, reference, symmetries) for mode, r in results.items()}
+
+
+def load_reference(source) -> Dataset | None:
+    """The ground truth of a dive's source for evaluation after a run: a :class:`Dataset` with truth or object
+    poses, a mission directory with ``ground_truth/``; None for a bag or a dive without truth."""
+    import os
+    from pathlib import Path
+
+    if isinstance(source, Dataset):
+        ds = source
+    else:
+        path = Path(os.fspath(source))
+        if not (path / "mission.json").is_file():
+            return None
+        from ..dataset import read_mission
+
+        ds = read_mission(path)
+    return ds if ds.truth is not None or ds.objects else None
