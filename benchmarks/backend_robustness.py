@@ -33,7 +33,8 @@ from semslam.experiments.montecarlo import make_mission
 from semslam.experiments.outliers import corrupt_detections, outlier_usage
 from semslam.simulation.detections import simulate_detections
 from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config
-from semslam.slam import SlamConfig, run_slam
+from semslam.slam import SlamConfig
+from semslam.run import run_slam
 
 SETTINGS = {
     "gross": dict(kind="mixed", translation_m=(0.3, 0.5), rotation_deg=(20.0, 40.0)),

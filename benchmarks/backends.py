@@ -5,7 +5,7 @@ Run: ``.venv/bin/python benchmarks/backends.py [--runs 30] [--scenarios default,
 (``--csv``: the mean error over time per backend and ``DIR/report.html`` with its figure), or
 ``--timing`` for the best-of-3 real-time factor of each backend on mission 0
 (prints markdown tables). Scenarios: ``default`` (the default 3-loop mission, mode ``pose``) and ``heading`` (a 2-degree
-constant AHRS yaw bias, mode ``pose+heading`` with the surveyed ``elbow_1``, as in RESULTS' heading-bias section).
+constant AHRS yaw bias, mode ``pose+heading`` with the surveyed ``elbow_1``, as in history/slam.md's heading-bias section).
 
 Columns: ATE of the current-time estimates (each epoch as estimated at that epoch: the EKF's filter, iSAM2's graph
 at that moment; batch has no online solution and shows its front-end filter's), ATE of the trajectory as each
@@ -26,7 +26,7 @@ import numpy as np
 
 from semslam.experiments.montecarlo import make_mission, truth_run
 from semslam.slam import SlamConfig
-from semslam.slam.metrics import anees, nees
+from semslam.evaluation.metrics import anees, nees
 
 SCENARIOS = {
     "default": dict(mode="pose", yaw_bias_deg=0.0, overrides={}, surveyed=()),

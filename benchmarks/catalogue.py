@@ -52,7 +52,8 @@ from collections import Counter
 import numpy as np
 
 from semslam.experiments.recognition_scoring import score_scan
-from semslam.pipeline import PipelineConfig, ScanRecognizer, detect_mission
+from semslam.pipeline import PipelineConfig, ScanRecognizer
+from semslam.pipeline.mission import detect_mission
 from semslam.pipeline.parts import PartsConfig
 from semslam.recognition import build_database
 from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission

@@ -60,7 +60,7 @@ def main() -> None:
     from distributed import Client, LocalCluster
 
     from semslam.cli.cmd_batch import process_dive
-    from semslam.experiments.batch import run_batch
+    from semslam.batch.dives import run_batch
     from semslam.experiments.montecarlo import run_montecarlo, write_montecarlo
 
     work = Path(args.work)
@@ -70,7 +70,8 @@ def main() -> None:
 
     dives = []
     if "batch" not in args.skip:
-        from semslam.simulation import SimulatorConfig, simulate_mission, write_mission
+        from semslam.simulation import SimulatorConfig, simulate_mission
+        from semslam.dataset import write_mission
         from semslam.simulation.builtin_db import builtin_database
 
         builtin_database(seed=0)  # the disk cache, once, outside the timings

@@ -88,7 +88,7 @@ def get_builtin_db(args):
 
 
 def bench_loo(args, db) -> None:
-    from semslam.recognition import leave_one_out
+    from semslam.evaluation.classifier import leave_one_out
 
     print(f"\n### Leave-one-out on the built-in database ({db.n_views} views, seed {args.seed})\n")
     print("| descriptor | classifier | accuracy | per-class recall | time |")
@@ -121,7 +121,7 @@ def novel_views(args):
 def clutter(args):
     """Unknown objects: the simulator's rocks and pipe offcuts (its private mesh makers, seen by the same
     Kinect-like camera as the database) when it has them, plus synthetic rocks, pipes and wall pieces."""
-    from semslam.experiments.synthetic_views import clutter_clouds
+    from semslam.simulation.synthetic_views import clutter_clouds
 
     out = [(f"synthetic {kind}", cloud) for kind, cloud in clutter_clouds(args.n_clutter, n_points=2000, seed=args.seed)]
     try:

@@ -50,7 +50,8 @@ def timed(fn, reps: int) -> tuple[float, float, float]:
 
 def main() -> None:
     from semslam.cloud import PointCloud
-    from semslam.descriptors import compute_esf, compute_fpfh, compute_vfh, estimate_normals
+    from semslam.descriptors import compute_esf, compute_vfh, estimate_normals
+    from semslam.descriptors.fpfh import compute_fpfh
     from semslam.io import read_point_cloud, write_point_cloud
 
     ap = argparse.ArgumentParser()

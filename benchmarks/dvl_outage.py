@@ -1,6 +1,6 @@
 """DVL outages (issue 18): is the filter honest when the DVL is out for long, or never there?
 
-``--measure`` first measures the unaided motion (``semslam.slam.motion_noise.measure_unaided_motion``: the
+``--measure`` first measures the unaided motion (``semslam.evaluation.motion_noise.measure_unaided_motion``: the
 velocity random walk and the velocity spread) on the DVL logs of ``--measure-runs`` simulator missions whose
 seeds (100..) are not those of the Monte Carlo (1..) and prints it: these are the defaults of
 ``SlamConfig().motion``. Then the Monte Carlo of the outage scenarios (first half, middle third, last third, the
@@ -31,7 +31,7 @@ def main() -> None:
 
     from semslam.experiments.montecarlo import make_mission
     from semslam.experiments.outage import outage_table, run_outage_montecarlo
-    from semslam.slam.motion_noise import measure_unaided_motion
+    from semslam.evaluation.motion_noise import measure_unaided_motion
 
     if args.measure:
         missions = [make_mission(100 + i) for i in range(args.measure_runs)]

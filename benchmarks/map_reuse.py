@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from semslam.simulation import SimulatorConfig, simulate_mission  # noqa: E402
 from semslam.simulation.truth_slam import run_truth_slam  # noqa: E402
 from semslam.slam import read_survey  # noqa: E402
-from semslam.slam.export import write_landmarks_json  # noqa: E402
+from semslam.run.export import write_landmarks_json  # noqa: E402
 
 
 def one(seed: int, gps: int, work: Path) -> dict:

@@ -102,11 +102,11 @@ def main() -> int:
     from semslam.io import write_point_cloud
     from semslam.pipeline import ScanRecognizer
     from semslam.recognition import build_database
-    from semslam.recognition.database import save_database
+    from semslam.recognition.storage import save_database
     from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
 
     from semslam.pipeline import PipelineConfig
-    from semslam.registration import PoseConfig
+    from semslam.pose import PoseConfig
 
     overrides = {}
     for item in args.pose_set:

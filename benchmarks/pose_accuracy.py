@@ -31,7 +31,7 @@ import numpy as np
 
 def main() -> None:
     from semslam.simulation.builtin_db import builtin_database
-    from semslam.registration import PoseConfig, prepare_pose_model
+    from semslam.pose import PoseConfig, prepare_pose_model
     from semslam.experiments.pose_eval import evaluate, simulated_clusters, summary_table
     from semslam.simulation import builtin_view_clouds
 

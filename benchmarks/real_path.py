@@ -40,9 +40,10 @@ from semslam.run import open_dive, run_stream  # noqa: E402
 from semslam.run.dive import run_dive, write_outcome  # noqa: E402
 from semslam.simulation import SimulatorConfig, simulate_mission  # noqa: E402
 from semslam.simulation.builtin_db import builtin_database  # noqa: E402
-from semslam.slam import MODES, read_detections_jsonl  # noqa: E402
-from semslam.slam.evaluation import ate_4dof  # noqa: E402
-from semslam.slam.metrics import nees  # noqa: E402
+from semslam.slam import MODES
+from semslam.io.detections import read_detections_jsonl
+from semslam.evaluation.slam_run import ate_4dof  # noqa: E402
+from semslam.evaluation.metrics import nees  # noqa: E402
 
 
 def make_dive(seed: int, gps: int, out: Path, fmt: str, loops: int = 3, scan_interval_s: float = 0.5):

@@ -37,9 +37,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from semslam.io import read_point_cloud  # noqa: E402
-from semslam.pipeline.fuse import fuse_class_views  # noqa: E402
+from semslam.recognition.fuse import fuse_class_views  # noqa: E402
 from semslam.recognition import Recognizer  # noqa: E402
-from semslam.recognition.database import build_database, folder_classes  # noqa: E402
+from semslam.recognition.build import build_database, folder_classes
 from semslam.registration import RegisterConfig, align_upright, register  # noqa: E402
 from semslam.segmentation.clean import clean_view  # noqa: E402
 

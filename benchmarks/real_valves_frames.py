@@ -231,8 +231,8 @@ def loso_fused_database(data: Path, held_out: str, up):
     """The views of every setting but ``held_out``, cleaned and fused per class (``db build --fuse --up``;
     ``up``: one direction, None, or ``{setting: direction}`` -- each view about its own setting's up)."""
     from semslam.io import read_point_cloud
-    from semslam.pipeline.fuse import fuse_class_views
-    from semslam.recognition.database import build_database, folder_classes
+    from semslam.recognition.fuse import fuse_class_views
+    from semslam.recognition.build import build_database, folder_classes
     from semslam.segmentation.clean import clean_view
 
     items: dict = {}

@@ -71,7 +71,8 @@ def mission_pr(args) -> None:
 
 
 def loo_table(args) -> None:
-    from semslam.recognition import build_database, leave_one_out
+    from semslam.recognition import build_database
+    from semslam.evaluation.classifier import leave_one_out
     from semslam.simulation.config import KinectConfig
     from semslam.simulation.kinect import SURVEY_KINECT, builtin_view_clouds
 

@@ -53,8 +53,8 @@ def pose_table(n: int, prior: bool) -> None:
     from scipy.spatial.transform import Rotation
 
     from semslam.geometry import rpy_from_rotation, wrap_angle
-    from semslam.registration import estimate_object_pose, prepare_pose_model
-    from semslam.experiments.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+    from semslam.pose import estimate_object_pose, prepare_pose_model
+    from semslam.simulation.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
     from semslam.simulation import builtin_objects
 
     rng = np.random.default_rng(0)

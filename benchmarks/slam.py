@@ -15,7 +15,7 @@ from semslam.geometry import RigidTransform, rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
 from semslam.slam.association import innovation, measurement_from_detection
 from semslam.slam.ekf import SemanticEkf
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 
 
 def _map(n_landmarks: int, rng) -> SemanticEkf:

@@ -14,11 +14,13 @@ import math
 
 import numpy as np
 
-from semslam.pipeline import ScanRecognizer, detect_mission
+from semslam.pipeline import ScanRecognizer
+from semslam.pipeline.mission import detect_mission
 from semslam.simulation.builtin_db import builtin_database
 from semslam.simulation import simulate_mission
 from semslam.simulation.truth_slam import builtin_symmetries
-from semslam.slam import MODES, run_slam
+from semslam.slam import MODES
+from semslam.run import run_slam
 
 
 

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from semslam.cloud import PointCloud  # noqa: E402
 from semslam.errors import SemslamError  # noqa: E402
 from semslam.recognition import Recognizer, build_database  # noqa: E402
-from semslam.recognition.database import folder_classes  # noqa: E402
+from semslam.recognition.build import folder_classes
 
 
 def scaled(cloud: PointCloud, k: float) -> PointCloud:

@@ -117,7 +117,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     Raises :class:`~semslam.errors.InputError` if ``out_dir`` is a file, a non-empty directory semslam did not
     write, or an earlier run (unless ``overwrite``): a run never mixes its files with another's.
     """
-    from .recognition import build_database, leave_one_out, save_database
+    from .recognition import build_database, save_database
+    from .evaluation.classifier import leave_one_out
     from .dataset import read_mission, write_mission
     from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
     from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
@@ -184,7 +185,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         _write_json(out / "metrics.json", metrics)
         _write_json(out / "config.json", {
             "demo": asdict(cfg), "simulator": sim_cfg.to_dict(), "pipeline": rec_out["pipeline_config"],
-            "slam": {m: r.config.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
+            "slam": {m: r.metadata.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
         })
         from .report.build import build_report
 
@@ -216,8 +217,9 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     from .pipeline import PipelineConfig, ScanRecognizer
     from .run import open_dive, run_stream
     from .simulation.truth_slam import builtin_symmetries
-    from .slam import write_detections_jsonl, write_run
-    from .slam.rundir import DETECTIONS, mode_dir
+    from .io.detections import write_detections_jsonl
+    from .run.rundir import write_run
+    from .run.rundir import DETECTIONS, mode_dir
 
     pipe_cfg = PipelineConfig(descriptor=cfg.descriptor, classifier=cfg.classifier)
     recognizer = ScanRecognizer(db, pipe_cfg, seed=cfg.seed)
@@ -240,7 +242,7 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})
     if best_scan[1] is not None:
         _write_fig3_data(out / "fig3_scan.npz", *best_scan[1])
-    from .slam.evaluation import evaluate_results
+    from .evaluation.slam_run import evaluate_results
 
     found.results = evaluate_results(found.results, mission, symmetries)  # against the simulator's truth, after
     for mode, res in found.results.items():
@@ -274,7 +276,7 @@ def _write_consensus(out: Path, mission, detections_by_scan: dict, pose_result) 
     if pose_result is None or not detections_by_scan:
         return
     stamps, pos = pose_result.stamps_s, pose_result.position_ned_m
-    ahrs_t, ahrs_rpy = mission.ahrs.stamp_s, mission.ahrs.rpy_rad
+    ahrs_t, ahrs_rpy = mission.attitude.stamp_s, mission.attitude.rpy_rad
     cons = ConsensusInitializer(**_consensus_params(pose_result))
     pools: dict[str, list] = {}
     for scan_id in sorted(detections_by_scan):
@@ -283,7 +285,7 @@ def _write_consensus(out: Path, mission, detections_by_scan: dict, pose_result) 
             p = np.array([np.interp(t, stamps, pos[:, i]) for i in range(3)])
             i = int(np.clip(np.searchsorted(ahrs_t, t), 0, len(ahrs_t) - 1))
             T_wv = RigidTransform.from_rotation_translation(rotation_from_rpy(*ahrs_rpy[i]), p)
-            T_wo = T_wv @ mission.T_vehicle_scanner @ det.T_sensor_object
+            T_wo = T_wv @ mission.vehicle.scanner.T_vehicle_scanner @ det.T_sensor_object
             obs = Observation(det.label, t, T_wo.translation_m, T_wo.rotation)
             pools.setdefault(det.label, []).append(obs)
             pool_before = list(cons.pools.get(det.label, [])) + [obs]

@@ -48,10 +48,6 @@ class SimulationError(SemslamError):
     """The simulator was given an impossible configuration."""
 
 
-class MissionError(SemslamError):
-    """A mission directory is missing a file, or a file in it is malformed."""
-
-
 class SlamError(SemslamError):
     """The filter was given inconsistent input (unsorted stamps, wrong sizes, ...)."""
 
@@ -68,5 +64,5 @@ class BagError(SemslamError):
     """A ROS bag cannot be read: missing or corrupt file, unknown message type, missing or mistyped topic."""
 
 
-class DatasetError(MissionError):
+class DatasetError(SemslamError):
     """A dataset (sensor logs, vehicle description, mission directory) is missing, malformed or inconsistent."""

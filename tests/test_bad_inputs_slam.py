@@ -18,10 +18,12 @@ from semslam.dataset import VehicleDescription
 from semslam.detection import Detection
 from semslam.errors import ConfigError, InputError, ReportError, SemslamError, SlamError
 from semslam.experiments.montecarlo import run_montecarlo
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 from semslam.geometry import RigidTransform
 from semslam.report.build import build_report, load_trajectory_csv
-from semslam.slam import SemanticEkf, SlamConfig, SlamSession, read_detections_jsonl, run_slam
+from semslam.slam import SemanticEkf, SlamConfig, SlamSession
+from semslam.io.detections import read_detections_jsonl
+from semslam.run import run_slam
 
 
 def _words(*words: str) -> str:

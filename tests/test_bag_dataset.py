@@ -51,7 +51,7 @@ def test_every_bag_format_round_trips_the_logs_and_scans(mission, tmp_path):
     for fmt in FORMATS:
         bag = write_bag(mission, _bag_name(tmp_path, fmt), fmt)
         back = read_mission(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=no_mount))
-        np.testing.assert_allclose(back.T_vehicle_scanner.matrix, mission.T_vehicle_scanner.matrix, atol=1e-12)
+        np.testing.assert_allclose(back.vehicle.scanner.T_vehicle_scanner.matrix, mission.vehicle.scanner.T_vehicle_scanner.matrix, atol=1e-12)
         assert back.metadata["source"]["T_vehicle_scanner_from"] == "/tf_static"
         np.testing.assert_allclose(back.attitude.stamp_s, mission.attitude.stamp_s, rtol=0, atol=1e-9)
         np.testing.assert_allclose(back.attitude.rpy_rad, mission.attitude.rpy_rad, rtol=0, atol=1e-12)
@@ -71,9 +71,9 @@ def test_every_bag_format_round_trips_the_logs_and_scans(mission, tmp_path):
 def test_bags_give_the_mission_directory_detections_and_trajectories(mission, recognizer, tmp_path):
     """The issue's round trip: ROS 1, ROS 2 mcap and ROS 2 sqlite3 give the same detections and the same
     trajectories (to 1e-9) as the mission directory."""
-    from semslam.pipeline import detect_mission
+    from semslam.pipeline.mission import detect_mission
     from semslam.simulation.truth_slam import builtin_symmetries
-    from semslam.slam import run_slam
+    from semslam.run import run_slam
 
     sym = builtin_symmetries()
     ref_dets = detect_mission(mission, recognizer, seed=0).detections_by_scan
@@ -144,11 +144,12 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
 def test_report_of_a_dive_without_ground_truth(tmp_path):
     """A recorded dive has no truth: the report leaves the truth-based sections out and still shows the
     trajectories, the 3-sigma bounds over time and the landmark maps."""
-    from semslam.experiments.synthetic import square_mission
+    from semslam.simulation.synthetic import square_mission
     from semslam.report.build import build_report
     from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
-    from semslam.slam import run_slam, write_run
-    from semslam.slam.rundir import mode_dir
+    from semslam.run import run_slam
+    from semslam.run.rundir import write_run
+    from semslam.run.rundir import mode_dir
 
     m = square_mission(seed=1, loops=1)
     dets = simulate_detections(m, TruthDetectionConfig(), seed=1)

@@ -1,4 +1,4 @@
-"""``semslam batch`` / :func:`semslam.experiments.batch.run_batch`: one run directory per dive, the summary and
+"""``semslam batch`` / :func:`semslam.batch.dives.run_batch`: one run directory per dive, the summary and
 index, byte-identical outputs serially and on a local cluster (2 worker processes, 1 thread each), a corrupt dive
 failing alone, a worker killed mid-dive, reruns skipping complete dives. Tiny missions (1 loop, 4 coarse scans)
 and a 1-class database keep it fast."""
@@ -17,7 +17,7 @@ import pytest
 
 from semslam._outdir import MARKER, is_owned
 from semslam.cli.cmd_batch import process_dive
-from semslam.experiments.batch import INDEX, SUMMARY_CSV, SUMMARY_MD, TIMINGS, run_batch
+from semslam.batch.dives import INDEX, SUMMARY_CSV, SUMMARY_MD, TIMINGS, run_batch
 
 DATA = Path(__file__).parent / "data"
 OPTIONS = {"modes": ["dr", "pose"], "seed": 3, "no_report": True}
@@ -27,7 +27,8 @@ OPTIONS = {"modes": ["dr", "pose"], "seed": 3, "no_report": True}
 def dives(tmp_path_factory):
     """Two simulated missions, a corrupt one, and a small database."""
     from semslam.recognition import save_database
-    from semslam.simulation import SimulatorConfig, simulate_mission, write_mission
+    from semslam.simulation import SimulatorConfig, simulate_mission
+    from semslam.dataset import write_mission
     from semslam.simulation.cad_models import build_models_database
 
     root = tmp_path_factory.mktemp("dives")

@@ -1,4 +1,4 @@
-"""``--scheduler tls://...`` (semslam.experiments._dask, docs/batch.md): a real ``dask scheduler`` and ``dask worker``
+"""``--scheduler tls://...`` (semslam.batch.engine, docs/batch.md): a real ``dask scheduler`` and ``dask worker``
 with TLS on 127.0.0.1, certificates made here by ``openssl`` (a CA, and one signed certificate for the scheduler,
 the worker and the client; a second CA with its own certificate for a stranger). A batch runs through it from the
 CLI, and tasks from Dask's TLS config; a client without the certificates, or with the stranger's, is refused with
@@ -22,8 +22,8 @@ import psutil
 import pytest
 
 from semslam.errors import InputError
-from semslam.experiments import _dask
-from semslam.experiments._dask import dask_client, map_tasks, scheduler_security, scheduler_tls
+from semslam.batch import engine as _dask
+from semslam.batch.engine import dask_client, map_tasks, scheduler_security, scheduler_tls
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -137,7 +137,7 @@ def test_batch_on_a_tls_scheduler_gives_the_serial_summary(tls_cluster, tmp_path
     order; the rows and summary are the serial batch's. (Dives that fail at once, a corrupt and an empty mission:
     a real dive takes minutes.)"""
     from semslam.cli.main import main
-    from semslam.experiments.batch import SUMMARY_CSV, SUMMARY_MD
+    from semslam.batch.dives import SUMMARY_CSV, SUMMARY_MD
 
     address, good, _other, procs = tls_cluster
     corrupt, empty = tmp_path / "dives" / "corrupt", tmp_path / "dives" / "empty"

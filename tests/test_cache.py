@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from semslam._cache import cached_arrays
-from semslam.registration.search import DistanceField
+from semslam.pose.search import DistanceField
 
 
 def test_cache_hits_rebuilds_a_corrupt_entry_and_can_be_off(tmp_path, monkeypatch):
@@ -54,7 +54,7 @@ def test_cached_distance_field_equals_the_built_one(tmp_path, monkeypatch):
 
 def test_cached_view_centroids_equal_the_built_ones(tmp_path, monkeypatch):
     """The translation starts read from the cache are the built ones, NaN (no facing sample) included."""
-    from semslam.registration.search import ViewCentroids
+    from semslam.pose.search import ViewCentroids
 
     monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(tmp_path))
     rng = np.random.default_rng(1)

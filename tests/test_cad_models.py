@@ -53,7 +53,8 @@ def test_cli_builds_the_three_classes_with_the_builtin_sizes(db_path, test_data,
 
 def test_the_database_recognises_the_parts_in_simulated_scans(db_path):
     from semslam.experiments.recognition_scoring import score_scan
-    from semslam.pipeline import ScanRecognizer, detect_mission
+    from semslam.pipeline import ScanRecognizer
+    from semslam.pipeline.mission import detect_mission
     from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
 
     db = load_database(db_path)

@@ -1,6 +1,6 @@
 """Pose and size of catalogue parts whose origin (bounding-box centre) is far from their surface: the butterfly
 valve (a wafer ring with a lever along +x: L-shaped) was recognised in the catalogue benchmark but never fitted
-(ICP fitness 0.19-0.68) and 3 of its 8 clusters failed the size test (issue #15, benchmarks/RESULTS.md)."""
+(ICP fitness 0.19-0.68) and 3 of its 8 clusters failed the size test (issue #15, benchmarks/history/catalogue.md)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from semslam.recognition.plausibility import principal_extent
-from semslam.registration.pose import estimate_object_pose, prepare_pose_model
-from semslam.registration.search import ViewCentroids
+from semslam.pose.estimate import estimate_object_pose, prepare_pose_model
+from semslam.pose.search import ViewCentroids
 from semslam.simulation.cad_models import models_view_clouds
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT

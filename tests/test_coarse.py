@@ -111,10 +111,10 @@ def test_bad_inputs_raise_named_errors():
         align_prerejective(src, fs_nan, tgt, ft)
 
 
-# -- global grid search (semslam.registration.search): kernels against brute force ----------------------
+# -- global grid search (semslam.pose.search): kernels against brute force ----------------------
 
-from semslam.registration import _search_kernels as SK  # noqa: E402
-from semslam.registration.search import (  # noqa: E402
+from semslam.pose import _search_kernels as SK  # noqa: E402
+from semslam.pose.search import (  # noqa: E402
     DistanceField, RangeImage, pairwise_rotation_distances, so3_grid)
 from semslam.symmetry import Symmetry  # noqa: E402
 
@@ -214,7 +214,7 @@ def test_pairwise_rotation_distances_match_symmetry_errors():
 # -- coarse-to-fine rotation grid, ICP candidates of the distance field, numba ICP ------------------------
 
 def test_rotation_hierarchy_parents_are_nearest_coarse_rotations():
-    from semslam.registration.search import RotationHierarchy
+    from semslam.pose.search import RotationHierarchy
 
     fine = so3_grid(512)
     h = RotationHierarchy.build(fine, 64)

@@ -1,4 +1,4 @@
-"""The Dask engine (semslam.experiments._dask): ordered results, errors, a killed worker's task re-run, and the
+"""The Dask engine (semslam.batch.engine): ordered results, errors, a killed worker's task re-run, and the
 engine-independence of Monte Carlo and database building (byte-identical outputs serially and on a local cluster
 of 2 worker processes with 1 thread each)."""
 
@@ -16,7 +16,7 @@ import psutil
 import pytest
 
 from semslam.errors import InputError, SlamError
-from semslam.experiments._dask import TaskFailed, check_jobs, map_tasks
+from semslam.batch.engine import TaskFailed, check_jobs, map_tasks
 
 DATA = Path(__file__).parent / "data"
 
@@ -42,7 +42,7 @@ def test_task_error_raised_or_captured(client):
 
 
 def test_bad_jobs_and_scheduler_are_one_line_errors(monkeypatch):
-    import semslam.experiments._dask as engine
+    import semslam.batch.engine as engine
 
     monkeypatch.setattr(engine, "CONNECT_TIMEOUT", "1s")
     with pytest.raises(InputError, match="'--jobs'.*positive.*Got 0"):
@@ -153,7 +153,7 @@ def test_cli_montecarlo_and_db_build_on_a_scheduler(client, tmp_path, capsys):
 
 def test_local_cluster_is_sized_and_closed_with_its_workers():
     """``dask_client()`` without a scheduler: worker processes with 1 thread each, all gone on exit."""
-    from semslam.experiments._dask import dask_client
+    from semslam.batch.engine import dask_client
 
     with dask_client(workers=2) as c:
         assert sorted(c.nthreads().values()) == [1, 1]

@@ -21,7 +21,7 @@ from semslam.recognition import (
     load_database,
     save_database,
 )
-from semslam.experiments.synthetic_views import StandInDescriptors, synthetic_shape_views
+from semslam.simulation.synthetic_views import StandInDescriptors, synthetic_shape_views
 from semslam.symmetry import Symmetry
 
 
@@ -250,7 +250,8 @@ def test_viewdatabase_validates_construction():
 
 def test_build_with_real_descriptors(tmp_path):
     """The real ESF / VFH / normals (semslam.descriptors): separable synthetic shapes, exact round trip."""
-    from semslam.recognition import compute_view_descriptors, leave_one_out
+    from semslam.recognition import compute_view_descriptors
+    from semslam.evaluation.classifier import leave_one_out
 
     views, classes = synthetic_shape_views(5, n_points=300, seed=5)
     db = build_database(views, classes, normal_radius_m=0.015, esf_n_samples=5000, seed=0)

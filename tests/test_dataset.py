@@ -28,7 +28,9 @@ from semslam.dataset import (
 )
 from semslam.errors import DatasetError, SemslamError, SlamError
 from semslam.geometry import RigidTransform
-from semslam.slam import SlamConfig, SlamSession, initial_state_of, feed_message, merged_messages, run_slam
+from semslam.slam import SlamConfig, SlamSession, initial_state_of
+from semslam.run.dataset_loop import feed_message, merged_messages
+from semslam.run import run_slam
 
 
 def numpy_dive(seed: int = 0, duration_s: float = 60.0) -> Dataset:
@@ -206,22 +208,18 @@ def test_vehicle_file_round_trip_and_errors(tmp_path):
         read_vehicle_toml(tmp_path / "none.toml")
 
 
-def test_mission_directory_v1_still_reads(sim_mission, tmp_path):
-    """A version-1 directory (simulator settings in mission.json, no vehicle.toml, no beam ranges) reads, and
-    its vehicle description is the simulator's sensor specification."""
+def test_mission_directory_of_format_1_is_refused_with_a_one_line_error(sim_mission, tmp_path):
+    """Format 1 (semslam <= 0.1) is no longer read: a clear error naming the file and what to do, never a guess
+    of the vehicle from old simulator settings; a format-2 directory without its vehicle file names the file."""
     d = write_mission(sim_mission, tmp_path / "v1")
     meta = json.loads((d / "mission.json").read_text())
     meta["format_version"] = 1
-    meta["T_vehicle_scanner"] = {"matrix": sim_mission.T_vehicle_scanner.matrix.tolist()}
     (d / "mission.json").write_text(json.dumps(meta))
-    (d / "vehicle.toml").unlink()
-    rows = (d / "dvl.csv").read_text().splitlines()
-    (d / "dvl.csv").write_text("\n".join(",".join(r.split(",")[:5]) for r in rows) + "\n")
-    m = read_mission(d)
-    assert m.vehicle.to_dict() == sim_mission.vehicle.to_dict() and m.dvl.beam_range_m is None
-    np.testing.assert_array_equal(m.dvl.velocity_body_mps, sim_mission.dvl.velocity_body_mps)
+    with pytest.raises(DatasetError, match=r"mission.json.*format_version 1.*no longer reads"):
+        read_mission(d)
     meta["format_version"] = 2
     (d / "mission.json").write_text(json.dumps(meta))
+    (d / "vehicle.toml").unlink()
     with pytest.raises(DatasetError, match="vehicle.toml"):
         read_mission(d)
 
@@ -229,8 +227,9 @@ def test_mission_directory_v1_still_reads(sim_mission, tmp_path):
 def test_detect_mission_on_a_numpy_dataset_feeds_the_session():
     """Scans held in memory (a synthetic box on a floor, no simulator) through detect_mission: the same
     detections as the recogniser scan by scan, stamped inside each scan, and accepted by the session."""
-    from semslam.experiments.synthetic_views import partial_view, ring_viewpoints, synthetic_shape_views
-    from semslam.pipeline import PipelineConfig, ScanRecognizer, detect_mission, scan_seed
+    from semslam.simulation.synthetic_views import partial_view, ring_viewpoints, synthetic_shape_views
+    from semslam.pipeline import PipelineConfig, ScanRecognizer
+    from semslam.pipeline.mission import detect_mission, scan_seed
     from semslam.recognition import build_database
 
     views, classes = synthetic_shape_views(6, n_points=500, seed=2)

@@ -10,7 +10,7 @@ import pytest
 from semslam.cli.main import main
 from semslam.io import write_point_cloud
 from semslam.recognition import load_database
-from semslam.experiments.synthetic_views import synthetic_shape_views
+from semslam.simulation.synthetic_views import synthetic_shape_views
 
 
 @pytest.fixture

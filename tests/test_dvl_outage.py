@@ -12,10 +12,10 @@ from scipy.stats import chi2
 from semslam.dataset import DvlLog, VehicleDescription
 from semslam.errors import ConfigError, SlamError
 from semslam.experiments.outage import OUTAGE_SCENARIOS, outage_table, run_outage_montecarlo, with_dvl_outage
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.slam import SlamConfig, SlamSession
-from semslam.slam.motion_noise import measure_unaided_motion
+from semslam.evaluation.motion_noise import measure_unaided_motion
 
 
 def _random_walk_log(q_sigma, seconds=4000.0, rate_hz=5.0, seed=0, noise=0.0):

@@ -6,13 +6,8 @@ import numpy as np
 import pytest
 
 from semslam.errors import InputError, RecognitionError
-from semslam.recognition import (
-    Chi2NearestNeighbor,
-    SvmClassifier,
-    ViewDatabase,
-    confusion_matrix,
-    leave_one_out,
-)
+from semslam.recognition import Chi2NearestNeighbor, SvmClassifier, ViewDatabase
+from semslam.evaluation.classifier import confusion_matrix, leave_one_out
 from semslam.symmetry import Symmetry
 
 

@@ -24,7 +24,7 @@ from semslam.io.ros import (
     vectors_enu_from_ned,
 )
 from semslam.slam import SlamConfig, SlamResult
-from semslam.slam.export import (
+from semslam.run.export import (
     FORMATS,
     export_run,
     kitti_times_path,
@@ -34,13 +34,13 @@ from semslam.slam.export import (
     write_landmarks_ply,
     write_tum,
 )
-from semslam.slam.export_mcap import write_mcap
+from semslam.run.export_mcap import write_mcap
 
 
 @pytest.fixture(scope="module")
 def run():
     """A one-loop square mission, pose SLAM with truth-based detections (seeded): 101 epochs, 4 landmarks."""
-    from semslam.experiments.synthetic import square_mission
+    from semslam.simulation.synthetic import square_mission
     from semslam.simulation.detections import simulate_detections
     from semslam.simulation.truth_slam import builtin_symmetries, run_truth_slam, truth_detection_config
 
@@ -358,7 +358,7 @@ def test_ply_and_tum_interrupted_writes_leave_nothing(run, tmp_path: Path, monke
     monkeypatch.setattr(plyfile.PlyData, "write", half_write)
     with pytest.raises(OSError, match="disk full"):
         write_landmarks_ply(r, tmp_path / "map.ply")
-    import semslam.slam.export as export
+    import semslam.run.export as export
 
     calls = []
 

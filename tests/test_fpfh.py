@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semslam.descriptors import compute_fpfh, compute_spfh, estimate_normals, find_neighbors
+from semslam.descriptors.fpfh import compute_fpfh, compute_spfh
+from semslam.descriptors import estimate_normals, find_neighbors
 from semslam.descriptors._pair_kernels import fpfh_from_spfh
 from semslam.errors import DescriptorError
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from semslam.cli.main import main
-from semslam.descriptors import compute_fpfh, estimate_normals, find_neighbors
+from semslam.descriptors.fpfh import compute_fpfh
+from semslam.descriptors import estimate_normals, find_neighbors
 from semslam.descriptors.neighbors import grid_params
 from semslam.errors import InputError
 

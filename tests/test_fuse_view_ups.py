@@ -15,8 +15,8 @@ from semslam.cli.main import main
 from semslam.cloud import PointCloud
 from semslam.errors import DatabaseError
 from semslam.io import read_point_cloud, write_point_cloud
-from semslam.pipeline.fuse import fuse_class_views, read_up_csv
-from semslam.recognition.database import load_database
+from semslam.recognition.fuse import fuse_class_views, read_up_csv
+from semslam.recognition.storage import load_database
 
 SUBSET = Path(__file__).parent / "data" / "real_valves"
 LEVEL_UP = np.array([0.0, -1.0, 0.0])

@@ -81,7 +81,7 @@ def _only_semslam_errors(call, path, original: bytes, seed: int) -> int:
 
 @pytest.fixture(scope="module")
 def mission_dir(tmp_path_factory):
-    from semslam.experiments.synthetic import square_mission
+    from semslam.simulation.synthetic import square_mission
 
     return write_mission(square_mission(seed=1, loops=1), tmp_path_factory.mktemp("fz") / "m")
 
@@ -110,9 +110,10 @@ def test_slam_config_and_detections_files(tmp_path):
     import json
 
     from semslam.cli._inputs import read_config_file
-    from semslam.experiments.synthetic import square_mission
+    from semslam.simulation.synthetic import square_mission
     from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
-    from semslam.slam import SlamConfig, read_detections_jsonl, write_detections_jsonl
+    from semslam.slam import SlamConfig
+    from semslam.io.detections import read_detections_jsonl, write_detections_jsonl
 
     c = tmp_path / "config.json"
     c.write_text(json.dumps(SlamConfig().to_dict(), indent=1))

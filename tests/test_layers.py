@@ -4,16 +4,20 @@ below ``simulation`` imports it, and the filter and the pipeline load without th
 Layers, bottom to top (a module may import its own layer and those below):
 
 0. ``geometry``, ``cloud``, ``detection``, ``errors``, ``symmetry`` and the private helpers (``_validation``,
-   ``_atomic``, ``_pipeline_kernels``)
+   ``_atomic``)
 1. ``io``, ``dataset``
 2. ``segmentation``, ``descriptors``
-3. ``recognition``, ``registration``
+3. ``recognition`` (view databases, matching), ``registration`` (pairwise alignment of two clouds)
+3.5 ``pose`` (an object's 6-DoF pose against its model; uses registration)
 4. ``pipeline`` (scan -> detections)
-5. ``slam`` (detections + navigation -> map)
+5. ``slam`` (detections + navigation -> map: estimation only)
+5.5 ``evaluation`` (a finished run against ground truth)
 6. ``run`` (sources -> runner -> sinks; the ROS node sits on it)
 7. ``simulation`` (produces datasets)
-8. ``experiments``, ``report``, ``demo``
+8. ``batch`` (many dives, the Dask engine), ``experiments``, ``report``, ``demo``
 9. ``cli``
+
+Within the layers, no import circle between two modules (imports inside functions count).
 """
 
 from __future__ import annotations
@@ -29,17 +33,19 @@ PKG = Path(__file__).resolve().parents[1] / "semslam"
 
 LAYERS = {
     "geometry": 0, "geodesy": 0, "cloud": 0, "detection": 0, "errors": 0, "symmetry": 0, "_validation": 0, "_atomic": 0,
-    "_pipeline_kernels": 0, "_jsonable": 0, "_tables": 0, "_progress": 0, "_outdir": 0, "_workers": 0, "_cache": 0,
+    "_jsonable": 0, "_tables": 0, "_progress": 0, "_outdir": 0, "_workers": 0, "_cache": 0,
     "limits": 0,
     "__init__": 0,
     "io": 1, "dataset": 1,
     "segmentation": 2, "descriptors": 2,
     "recognition": 3, "registration": 3,
+    "pose": 3.5,
     "pipeline": 4,
     "slam": 5,
+    "evaluation": 5.5,
     "run": 6,
     "simulation": 7,
-    "experiments": 8, "report": 8, "demo": 8,
+    "batch": 8, "experiments": 8, "report": 8, "demo": 8,
     "cli": 9,
 }
 
@@ -121,3 +127,78 @@ def test_library_layers_load_without_mesh_libraries(module):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == ""
+
+
+def _module_graph(root: Path = PKG) -> dict[str, set[str]]:
+    """Module -> modules it imports (anywhere in the file, functions included), dotted names below ``semslam``."""
+    modules = {".".join(p.relative_to(root).with_suffix("").parts) for p in root.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root).with_suffix("").parts)
+        name = ".".join(parts)
+        pkg = parts[:-1]
+        edges = graph.setdefault(name, set())
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom) or node.level == 0:
+                continue
+            base = pkg[: len(pkg) - (node.level - 1)] + ((node.module or "").split(".") if node.module else [])
+            target = ".".join(base)
+            for a in node.names:
+                sub = f"{target}.{a.name}" if target else a.name
+                if sub in modules:
+                    edges.add(sub)
+                elif target in modules:
+                    edges.add(target)
+                elif f"{target}.__init__" in modules:
+                    edges.add(f"{target}.__init__")
+    return graph
+
+
+def import_circles(root: Path = PKG) -> list[list[str]]:
+    """Strongly connected groups of two or more modules (Tarjan), a package's ``__init__`` aside (it re-exports)."""
+    graph = {m: {e for e in es if not e.endswith("__init__")} for m, es in _module_graph(root).items()
+             if not m.endswith("__init__")}
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                out.append(sorted(group))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circle_between_modules():
+    """Catches two modules importing each other, even lazily (``io/export`` <-> ``io/export_mcap`` once)."""
+    assert import_circles() == []
+
+
+def test_the_circle_test_finds_a_planted_circle(tmp_path):
+    import shutil
+
+    copy = tmp_path / "semslam"
+    shutil.copytree(PKG, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    target = copy / "geometry.py"
+    target.write_text(target.read_text(encoding="utf-8") + "\n\ndef _planted():\n    from .cloud import PointCloud\n",
+                      encoding="utf-8")
+    assert ["cloud", "geometry"] in import_circles(copy)

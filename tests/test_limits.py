@@ -241,7 +241,7 @@ def test_an_attitude_stamp_at_2_pow_31_s_is_an_error_not_a_hang():
 
 
 def test_an_ahrs_csv_row_at_2_pow_31_s_is_an_error_not_a_hang(tmp_path):
-    from semslam.slam import run_slam
+    from semslam.run import run_slam
 
     ta = np.arange(0.0, 3.0, 0.1)
     dvl = DvlLog(ta, np.tile([0.2, 0.0, 0.0], (len(ta), 1)), np.ones(len(ta), bool))

@@ -9,7 +9,7 @@ import numpy as np
 
 from semslam.detection import Detection
 from semslam.geometry import RigidTransform
-from semslam.slam.detections import write_detections_jsonl
+from semslam.io.detections import write_detections_jsonl
 
 
 def test_jsonl_lines_are_newline_terminated_and_round_trip(tmp_path: Path):

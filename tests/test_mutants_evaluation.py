@@ -12,7 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from semslam.geometry import RigidTransform, rotation_from_rpy
-from semslam.slam.evaluation import evaluate_landmark
+from semslam.evaluation.slam_run import evaluate_landmark
 from semslam.slam.results import LandmarkEstimate
 from semslam.symmetry import Symmetry
 
@@ -59,7 +59,7 @@ def test_landmark_error_metrics_only_when_there_are_landmarks_and_objects():
     """Catches ``or`` for ``and`` in the landmark-metrics guard: a run with true objects but no landmark mapped (a
     dead-reckoning run) gets no landmark error metrics at all (not keys set to None), and one with both gets them."""
     from semslam.slam import SlamConfig
-    from semslam.slam.evaluation import evaluate_run
+    from semslam.evaluation.slam_run import evaluate_run
     from semslam.slam.results import SlamResult
 
     k = 2
@@ -120,7 +120,7 @@ def test_wrong_object_updates_count_only_accepted_landmark_updates():
     """Catches ``!=`` for ``==`` in the record filter of ``wrong_object_updates``: only *accepted landmark updates*
     whose detection came from another object than the landmark's matched one count -- not a rejected update, not
     the creation of a landmark (``new_landmark``) nor a consensus candidate."""
-    from semslam.slam.evaluation import evaluate_run
+    from semslam.evaluation.slam_run import evaluate_run
 
     lm, objs = _scene(np.array([0.1, 0.2, 0.3]), rotation_from_rpy(0.1, 0.2, 0.3))   # matched to tee_1
     log = [dict(kind="landmark", landmark=0, accepted=True, object_name="tee_2"),    # wrong object: counts
@@ -137,7 +137,7 @@ def test_smoothed_metrics_only_for_a_run_with_a_smoother_and_truth(smoother):
     """Catches ``or`` for ``and`` in the smoothed-metrics guard: a run with ground truth but no smoother (no
     ``metrics["smoother"]``, no smoothed trajectory) gets no smoothed ATE (and no error); a run with both gets the
     smoothed trajectory's ATE against the truth (here 1 m, the online one 0)."""
-    from semslam.slam.evaluation import evaluate_run
+    from semslam.evaluation.slam_run import evaluate_run
 
     k = 2
     truth = SimpleNamespace(interpolate_position=lambda t: np.zeros((len(t), 3)))
@@ -157,7 +157,7 @@ def test_landmark_error_summaries_are_nan_aware_and_none_without_any_match():
     with two landmarks, one matched 5 cm from its object and one of a class with no true object (NaN errors), the
     mean and max position errors are 0.05 m (the NaN ignored) and the orientation error is the matched one's; with
     only the unmatched landmark, every summary is None (not NaN)."""
-    from semslam.slam.evaluation import evaluate_run
+    from semslam.evaluation.slam_run import evaluate_run
 
     rpy = np.array([0.1, 0.2, 0.3])
     lm, objs = _scene(rpy, Rotation.from_rotvec([0.0, 0.0, 0.02]).as_matrix() @ rotation_from_rpy(*rpy))

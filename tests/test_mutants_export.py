@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from semslam.slam import SlamConfig
-from semslam.slam.export import export_run
+from semslam.run.export import export_run
 from semslam.slam.results import SlamResult
 
 
@@ -61,7 +61,7 @@ def test_export_names_the_smoothed_kitti_files_after_their_content(tmp_path: Pat
 def test_tum_header_names_the_body_frame_of_the_world_frame(tmp_path: Path):
     """Catches an inverted body-frame label in the TUM header (``"FLU" if not frame == "enu"``): NED files are
     ``T_world_vehicle`` with an FRD body, ENU files with an FLU body (the module's frame convention)."""
-    from semslam.slam.export import write_tum
+    from semslam.run.export import write_tum
 
     res = _smoothed_result()
     ned = write_tum(res, tmp_path / "ned.tum").read_text().splitlines()[0]
@@ -76,7 +76,7 @@ def test_write_kitti_takes_its_paths_by_keyword_and_its_options_by_keyword_only(
     stray positional ``True`` would silently export the smoothed trajectory)."""
     import pytest
 
-    from semslam.slam.export import write_kitti
+    from semslam.run.export import write_kitti
 
     res = _smoothed_result()
     poses, times = write_kitti(result=res, path=tmp_path / "a.kitti")
@@ -91,7 +91,7 @@ def test_a_non_path_is_an_input_error_naming_the_argument(tmp_path: Path):
     import pytest
 
     from semslam.errors import InputError
-    from semslam.slam.export import write_kitti, write_tum
+    from semslam.run.export import write_kitti, write_tum
 
     res = _smoothed_result()
     with pytest.raises(InputError, match="The 'path' argument of write_tum must be a file path"):

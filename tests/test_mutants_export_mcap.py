@@ -19,7 +19,7 @@ from semslam.errors import InputError  # noqa: E402
 from semslam.geometry import rotation_from_rpy  # noqa: E402
 from semslam.io.ros import open_bag, vectors_enu_from_ned  # noqa: E402
 from semslam.slam import SlamConfig, SlamResult  # noqa: E402
-from semslam.slam.export_mcap import _slerp_rotation, _vehicle_pose_at, write_mcap  # noqa: E402
+from semslam.run.export_mcap import _slerp_rotation, _vehicle_pose_at, write_mcap  # noqa: E402
 from semslam.slam.results import LandmarkEstimate  # noqa: E402
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semslam.descriptors import compute_fpfh
+from semslam.descriptors.fpfh import compute_fpfh
 
 
 def test_capped_run_keeps_the_fpfh_of_a_two_point_neighbourhood():

@@ -14,11 +14,11 @@ import pytest
 
 pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip install gtsam)")
 
-from semslam.experiments.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_mission  # noqa: E402
 from semslam.geometry import RigidTransform, rotation_from_rpy  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
-from semslam.slam import feed_message, merged_messages  # noqa: E402
+from semslam.run.dataset_loop import feed_message, merged_messages
 from semslam.slam.association import measurement_from_detection  # noqa: E402
 from semslam.slam.graph import GraphSession  # noqa: E402
 

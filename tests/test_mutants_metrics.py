@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from semslam.slam.metrics import anees, chi2_band
+from semslam.evaluation.metrics import anees, chi2_band
 
 
 def test_anees_band_is_closed_at_both_ends():
@@ -24,7 +24,7 @@ def test_anees_band_is_closed_at_both_ends():
 def _epochs_with_nees(values):
     """Errors and covariances whose per-epoch position NEES is exactly ``values`` (float equality): error
     (1, 0, 0) and covariance diag(p, 1, 1) give NEES = 1 / p; p is nudged by ulps until that holds."""
-    from semslam.slam.metrics import nees
+    from semslam.evaluation.metrics import nees
 
     errs, covs = [], []
     for v in values:
@@ -44,7 +44,7 @@ def test_trajectory_nees_fraction_uses_the_closed_3_dof_interval():
     """Catches a per-epoch 95 % interval with the wrong degrees of freedom (the position NEES has 3: the limits
     are ``chi2.ppf(0.025, 3)`` = 0.2158 and ``chi2.ppf(0.975, 3)`` = 9.348, not those of 4 dof, 0.4844 and 11.14)
     and an open interval (epochs exactly on a limit are inside)."""
-    from semslam.slam.metrics import trajectory_metrics
+    from semslam.evaluation.metrics import trajectory_metrics
 
     lo, hi = chi2.ppf(0.025, 3), chi2.ppf(0.975, 3)
     vals = [lo, hi, 0.3, 10.0, 3.0, np.nextafter(lo, 0.0), np.nextafter(hi, np.inf), 0.1]
@@ -58,7 +58,7 @@ def test_trajectory_nees_fraction_uses_the_closed_3_dof_interval():
 def test_nis_summary_skips_an_empty_type_and_keeps_the_others():
     """Catches ``break`` for ``continue`` on an update type without values: the types after it must still be
     summarised (mean and band of mean of n chi2(dof), from scipy)."""
-    from semslam.slam.metrics import nis_summary
+    from semslam.slam.consistency import nis_summary
 
     out = nis_summary({"empty": ([], 3), "dvl": ([1.0, 2.0, 4.5], 3), "depth": ([0.5], 1)})
     assert set(out) == {"dvl", "depth"}

@@ -7,7 +7,7 @@ import pytest
 
 from semslam.dataset import DvlLog
 from semslam.errors import SlamError
-from semslam.slam.motion_noise import measure_unaided_motion
+from semslam.evaluation.motion_noise import measure_unaided_motion
 
 
 def test_two_valid_samples_are_enough_and_give_the_closed_form():

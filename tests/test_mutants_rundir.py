@@ -9,7 +9,7 @@ import numpy as np
 
 from semslam.slam import SlamConfig
 from semslam.slam.results import SlamResult
-from semslam.slam.rundir import UPDATES, write_run
+from semslam.run.rundir import UPDATES, write_run
 
 
 def test_update_log_rows_are_written(tmp_path: Path):
@@ -36,7 +36,7 @@ def test_update_log_rows_are_written(tmp_path: Path):
 def test_mode_dirs_lists_only_modes_with_a_trajectory(tmp_path: Path):
     """Catches an inverted "has a trajectory" test in ``mode_dirs``: only the per-mode directories that hold a
     trajectory file are runs ("pose+heading" lives in ``pose_heading``); an empty mode directory is not."""
-    from semslam.slam.rundir import TRAJECTORY, mode_dir, mode_dirs
+    from semslam.run.rundir import TRAJECTORY, mode_dir, mode_dirs
 
     for mode in ("pose", "pose+heading", "dr"):
         mode_dir(tmp_path, mode).mkdir(parents=True)
@@ -53,7 +53,7 @@ def test_trajectory_csv_carries_the_attitude_or_nan_without_it(tmp_path: Path):
     (9 significant digits), and exactly three ``nan`` for a result without attitude."""
     from dataclasses import replace
 
-    from semslam.slam.rundir import TRAJECTORY
+    from semslam.run.rundir import TRAJECTORY
 
     k = 3
     cov = np.tile(np.eye(3) * 1e-4, (k, 1, 1))

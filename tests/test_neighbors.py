@@ -129,7 +129,8 @@ def test_symmetric_spfh_is_bit_identical_to_the_row_by_row_kernel(nan_normals):
     # test (equal normals), NaN normals and duplicates are computed from both sides.
     from dataclasses import replace
 
-    from semslam.descriptors import compute_fpfh, compute_spfh, estimate_normals
+    from semslam.descriptors.fpfh import compute_fpfh, compute_spfh
+    from semslam.descriptors import estimate_normals
 
     rng = np.random.default_rng(7)
     pts = rng.random((400, 3)) * [0.2, 0.2, 0.02]

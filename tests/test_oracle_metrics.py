@@ -14,7 +14,8 @@ from scipy.stats import chi2, norm
 
 from semslam.slam import _ekf_kernels as kern
 from semslam.slam.association import GateThresholds
-from semslam.slam.metrics import anees, chi2_band, nees, nis_summary, trajectory_metrics
+from semslam.evaluation.metrics import anees, chi2_band, nees, trajectory_metrics
+from semslam.slam.consistency import nis_summary
 
 
 # ---------------------------------------------------------------------------------------------- chi2_band

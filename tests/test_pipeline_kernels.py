@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semslam.pipeline import _scan_angular_extent
+from semslam.pipeline._scan_helpers import _scan_angular_extent
 from semslam.recognition.plausibility import scan_angular_extent
 
 
@@ -87,7 +87,7 @@ def test_border_kernel_equals_array_expression():
 
 def test_input_indices_kernel_equals_segmentation_result():
     from semslam.cloud import PointCloud
-    from semslam.pipeline import _input_indices
+    from semslam.pipeline._scan_helpers import _input_indices
     from semslam.segmentation.scene import SegmentationConfig, segment_scene
 
     rng = np.random.default_rng(3)

@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 from semslam.detection import Detection
 from semslam.errors import RegistrationError
 from semslam.geometry import rpy_from_rotation, wrap_angle
-from semslam.registration import estimate_object_pose, prepare_pose_model
-from semslam.experiments.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+from semslam.pose import estimate_object_pose, prepare_pose_model
+from semslam.simulation.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +144,7 @@ def test_wrong_poses_are_flagged(mission_eval):
 @pytest.mark.parametrize("label", ["elbow", "reducing_tee"])
 def test_numba_icp_backend_matches_small_gicp(objects, label):
     """The grid search's ICP in numba (default) gives the pose small_gicp gives, within the noise."""
-    from semslam.registration import PoseConfig
+    from semslam.pose import PoseConfig
 
     obj = objects[label]
     rng = np.random.default_rng(11)
@@ -161,7 +161,7 @@ def test_numba_icp_backend_matches_small_gicp(objects, label):
 
 
 def test_coarse_to_fine_grid_finds_the_exhaustive_grid_pose(objects, models):
-    from semslam.registration import PoseConfig
+    from semslam.pose import PoseConfig
 
     obj = objects["ball_valve"]
     rng = np.random.default_rng(12)

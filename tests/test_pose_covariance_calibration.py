@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from semslam.registration.covariance import (AMBIGUOUS_ROTATION_VARIANCE_RAD2, CovarianceCalibration,
+from semslam.pose.covariance import (AMBIGUOUS_ROTATION_VARIANCE_RAD2, CovarianceCalibration,
                                              effective_points, hypothesis_spread, pose_covariance,
                                              tangent_difference, widen_untrusted)
 from semslam.symmetry import Symmetry

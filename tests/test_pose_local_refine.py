@@ -13,8 +13,8 @@ from scipy.spatial.transform import Rotation
 
 from semslam.cloud import PointCloud
 from semslam.errors import InputError
-from semslam.registration.pose import PoseConfig, estimate_object_pose, prepare_pose_model
-from semslam.registration.search import _local_rotations, rotation_distances
+from semslam.pose.estimate import PoseConfig, estimate_object_pose, prepare_pose_model
+from semslam.pose.search import _local_rotations, rotation_distances
 from semslam.simulation.cad_models import models_view_clouds
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT

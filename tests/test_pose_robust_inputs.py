@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from semslam.cloud import PointCloud
-from semslam.registration import estimate_object_pose
-from semslam.registration.search import RangeImage
+from semslam.pose import estimate_object_pose
+from semslam.pose.search import RangeImage
 
 
 def test_range_image_ignores_points_at_or_behind_the_sensor():

@@ -4,8 +4,8 @@ differences, the greedy distinct-hypothesis selection, RadiusGrid against cKDTre
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from semslam.registration.covariance import _xyz_rpy_covariance_of_inverse_numeric, xyz_rpy_covariance_of_inverse
-from semslam.registration.search import _greedy_distinct, pairwise_rotation_distances
+from semslam.pose.covariance import _xyz_rpy_covariance_of_inverse_numeric, xyz_rpy_covariance_of_inverse
+from semslam.pose.search import _greedy_distinct, pairwise_rotation_distances
 from semslam.symmetry import Symmetry
 
 
@@ -58,7 +58,7 @@ def test_greedy_distinct_equals_full_matrix():
 def test_radius_grid_equals_ckdtree():
     from scipy.spatial import cKDTree
 
-    from semslam.registration.search import RadiusGrid
+    from semslam.pose.search import RadiusGrid
 
     rng = np.random.default_rng(3)
     model = rng.normal(size=(3000, 3))
@@ -95,7 +95,7 @@ def _lattice_model(rng, n=3000):
 
 
 def test_radius_grid_pruned_search_equals_brute_force_with_ties():
-    from semslam.registration.search import RadiusGrid
+    from semslam.pose.search import RadiusGrid
 
     rng = np.random.default_rng(5)
     for trial in range(4):
@@ -138,8 +138,8 @@ def _align_and_score_reference(Rs, ts, src, field, truncations, tau):
 
 
 def test_align_and_score_matches_the_field_lookup_reference():
-    from semslam.registration import _search_kernels as K
-    from semslam.registration.search import DistanceField, so3_grid
+    from semslam.pose import _search_kernels as K
+    from semslam.pose.search import DistanceField, so3_grid
 
     rng = np.random.default_rng(6)
     d = rng.normal(size=(6000, 3))
@@ -159,7 +159,7 @@ def test_align_and_score_matches_the_field_lookup_reference():
 
 
 def test_range_image_equals_scatter_min_and_dilation():
-    from semslam.registration.search import RangeImage
+    from semslam.pose.search import RangeImage
 
     rng = np.random.default_rng(7)
     for dilate in (0, 1, 2):
@@ -179,7 +179,7 @@ def test_range_image_equals_scatter_min_and_dilation():
 
 
 def test_children_of_mask_equals_concatenation():
-    from semslam.registration.search import RotationHierarchy, so3_grid
+    from semslam.pose.search import RotationHierarchy, so3_grid
 
     h = RotationHierarchy.build(so3_grid(2048), 256)
     rng = np.random.default_rng(8)
@@ -191,7 +191,7 @@ def test_children_of_mask_equals_concatenation():
 
 
 def test_visibility_cost_object_frame_form_matches_scanner_frame_definition():
-    from semslam.registration.search import RangeImage
+    from semslam.pose.search import RangeImage
 
     rng = np.random.default_rng(9)
     d = rng.normal(size=(800, 3))
@@ -224,7 +224,7 @@ def test_batched_field_icp_equals_single_runs():
     import small_gicp
 
     from semslam.registration._icp_kernels import icp_plane_field, icp_plane_field_batch
-    from semslam.registration.search import DistanceField
+    from semslam.pose.search import DistanceField
 
     rng = np.random.default_rng(10)
     d = rng.normal(size=(20000, 3))
@@ -249,10 +249,10 @@ def test_batched_field_icp_equals_single_runs():
 def test_pose_internals_reuse_equals_the_separate_computations():
     """_final_scores == _final_score per hypothesis; the final ICP's fitness / RMSE and the nearest points
     it hands to the covariance == the KD-tree's (inlier_statistics) and a fresh query."""
-    from semslam.registration import pose as P
-    from semslam.experiments.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
+    from semslam.pose import estimate as P
+    from semslam.simulation.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
     from semslam.registration.result import inlier_statistics
-    from semslam.registration.search import RangeImage
+    from semslam.pose.search import RangeImage
     from semslam.simulation import builtin_objects
 
     obj = builtin_objects()["elbow"]

@@ -23,7 +23,7 @@ def test_callable_gets_done_and_total_and_bool_is_silent_or_a_bar(capsys):
 def test_long_calls_report_through_it():
     """The Monte Carlo (runs x modes) and the database build (views) take the same ``progress``."""
     from semslam.experiments.montecarlo import run_montecarlo
-    from semslam.experiments.synthetic_views import synthetic_shape_views
+    from semslam.simulation.synthetic_views import synthetic_shape_views
     from semslam.recognition import build_database
 
     calls, lines = [], []

@@ -16,7 +16,7 @@ import pytest
 
 from semslam.cloud import PointCloud
 from semslam.errors import DatabaseError, DescriptorError, InputError
-from semslam.experiments.synthetic_views import synthetic_shape_views
+from semslam.simulation.synthetic_views import synthetic_shape_views
 from semslam.recognition import (Recognizer, build_database, build_database_from_folder, compute_view_descriptors,
                                  load_database, save_database)
 from semslam.recognition.preprocessing import MAX_SPACING_RATIO, PREPROCESSING_VERSION, ViewPreprocessing

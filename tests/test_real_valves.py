@@ -19,8 +19,8 @@ from semslam.cli.main import main
 from semslam.cloud import PointCloud
 from semslam.errors import DatabaseError, InputError, RegistrationError
 from semslam.io import read_point_cloud, write_point_cloud
-from semslam.pipeline.fuse import build_fused_database, read_poses_csv
-from semslam.recognition.database import load_database
+from semslam.recognition.fuse import build_fused_database, read_poses_csv
+from semslam.recognition.storage import load_database
 from semslam.recognition.rejection import calibrate_rejection, loo_same_class_distances, same_viewpoint_pairs
 from semslam.registration import align_upright
 from semslam.segmentation.clean import clean_view, drawn_line_mask
@@ -337,7 +337,7 @@ def test_upright_registration_on_real_pairs_is_never_confidently_flipped():
 def test_pose_search_with_up_finds_a_new_view_of_a_fused_model(tmp_path):
     """estimate_object_pose(up_scanner, up_object) on a fused model (views at 0, 30, 60 degrees) and a view at
     45 degrees: the rotation within 5 degrees of the truth, and the search restricted to upright orientations."""
-    from semslam.registration import estimate_object_pose
+    from semslam.pose import estimate_object_pose
 
     _write_views(tmp_path, poses=None)
     db = build_fused_database(tmp_path, up_sensor=UP, voxel_leaf_m=None, normal_radius_m=0.01, esf_n_samples=2000)
@@ -356,8 +356,8 @@ def test_pose_search_with_up_finds_a_new_view_of_a_fused_model(tmp_path):
 def test_back_facing_share_tells_front_from_back():
     """A thin plate modelled from its front only (like a valve's handwheel scanned from one side) fits a cluster
     turned around as well as the true pose; the back-facing share must be ~0 at the true pose and ~1 turned."""
-    from semslam.registration import prepare_pose_model
-    from semslam.registration.pose import back_facing_shares
+    from semslam.pose import prepare_pose_model
+    from semslam.pose.estimate import back_facing_shares
 
     rng = np.random.default_rng(5)
     plate = np.c_[rng.uniform(-0.05, 0.05, 4000), rng.uniform(-0.03, 0.03, 4000), np.zeros(4000)]

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from semslam.report.build import _plt
+from semslam.report.plots import pyplot_agg as _plt
 from semslam.report.slam_sections import _section_heading_bias
 from semslam.report.html import COLLAPSE_ROWS, _table_html
 from semslam.report.summary import human_label, key_results, summary_section

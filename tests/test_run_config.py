@@ -222,7 +222,7 @@ def test_cli_slam_takes_its_modes_from_the_config_unless_the_command_line_names_
 def test_cli_batch_hands_every_dive_the_resolved_config(tmp_path, monkeypatch):
     """`semslam batch --preset/--config`: the resolved configuration travels in the dives' options (to Dask
     workers), from which process_dive rebuilds it."""
-    import semslam.experiments.batch as batch_mod
+    import semslam.batch.dives as batch_mod
     from semslam.cli.main import main
 
     seen = {}

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from semslam.dataset import PositionFixLog
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 from semslam.run import Attitude, Depth, Fix, Runner, open_dive, run_stream
 from semslam.run.health import HealthLimits, health_verdict
 from semslam.run.sources import dataset_messages
-from semslam.slam import run_slam
-from semslam.slam.evaluation import evaluate_results
+from semslam.run import run_slam
+from semslam.evaluation.slam_run import evaluate_results
 
 
 @pytest.fixture(scope="module")

@@ -11,15 +11,9 @@ import pytest
 from semslam.cloud import PointCloud
 from semslam.descriptors import compute_esf, compute_vfh, estimate_normals, point_spacing_m
 from semslam.errors import DatabaseError, DescriptorError, InputError
-from semslam.experiments.synthetic_views import partial_view, synthetic_shape_views
-from semslam.recognition import (
-    Recognizer,
-    build_database,
-    compute_view_descriptors,
-    leave_one_out,
-    load_database,
-    save_database,
-)
+from semslam.simulation.synthetic_views import partial_view, synthetic_shape_views
+from semslam.recognition import Recognizer, build_database, compute_view_descriptors, load_database, save_database
+from semslam.evaluation.classifier import leave_one_out
 from semslam.recognition.database import (
     AUTO_RULE,
     DEFAULT_NORMAL_RADIUS_M,
@@ -277,7 +271,7 @@ def test_cli_evaluate_and_build_on_views_in_millimetres(tmp_path, capsys):
 
     from semslam.cli.main import main
     from semslam.cloud import PointCloud
-    from semslam.experiments.synthetic_views import synthetic_shape_views
+    from semslam.simulation.synthetic_views import synthetic_shape_views
     from semslam.io import write_point_cloud
 
     views, _ = synthetic_shape_views(4, n_points=400, seed=3)

@@ -9,7 +9,7 @@ import pytest
 
 from semslam.errors import InputError
 from semslam.pipeline import PipelineConfig
-from semslam.registration.search import RangeImage
+from semslam.pose.search import RangeImage
 
 VP = np.zeros(3)
 CELL = 0.008

@@ -59,7 +59,7 @@ def test_resolve_lengths_without_a_grid_and_on_too_few_points():
 
 
 def test_pipeline_border_and_indices_with_origin_points():
-    from semslam.pipeline import _input_indices
+    from semslam.pipeline._scan_helpers import _input_indices
 
     pts = _scene(1)
     cfg = SegmentationConfig(drop_origin=True, max_range_m=1.0, voxel_leaf_m="auto", cluster_tolerance_m="auto",

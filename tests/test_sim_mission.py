@@ -13,20 +13,10 @@ import pytest
 
 from semslam._outdir import MARKER
 from semslam.cli.main import main
-from semslam.errors import MissionError, SimulationError
+from semslam.errors import DatasetError, SimulationError
 from semslam.geometry import wrap_angle
-from semslam.simulation import (
-    AhrsConfig,
-    DepthConfig,
-    DvlConfig,
-    ScannerConfig,
-    SimulatorConfig,
-    TrajectoryConfig,
-    WorldConfig,
-    read_mission,
-    simulate_mission,
-    write_mission,
-)
+from semslam.simulation import AhrsConfig, DepthConfig, DvlConfig, ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
+from semslam.dataset import read_mission, write_mission
 from semslam.simulation.sensors import dvl_beams_over_slope
 
 
@@ -76,8 +66,8 @@ def test_dvl_noise_and_dropouts_match_configuration(long_nav):
 
 def test_ahrs_and_depth_noise_match_configuration(long_nav):
     cfg, m = long_nav
-    i_s, i_t = _at_truth(m, m.ahrs.stamp_s)
-    err = wrap_angle(m.ahrs.rpy_rad[i_s] - m.truth.rpy_rad[i_t])
+    i_s, i_t = _at_truth(m, m.attitude.stamp_s)
+    err = wrap_angle(m.attitude.rpy_rad[i_s] - m.truth.rpy_rad[i_t])
     np.testing.assert_allclose(err.mean(axis=0), [0.0, 0.0, 0.03], atol=4 * np.max(cfg.ahrs.noise_rpy_rad) / np.sqrt(len(err)) + 1e-4)
     np.testing.assert_allclose(err.std(axis=0), cfg.ahrs.noise_rpy_rad, rtol=0.08)
     i_s, i_t = _at_truth(m, m.depth.stamp_s)
@@ -89,7 +79,7 @@ def test_ahrs_and_depth_noise_match_configuration(long_nav):
 def test_sensor_rates_and_truth(long_nav):
     _, m = long_nav
     np.testing.assert_allclose(np.diff(m.dvl.stamp_s), 0.1)
-    np.testing.assert_allclose(np.diff(m.ahrs.stamp_s), 0.05)
+    np.testing.assert_allclose(np.diff(m.attitude.stamp_s), 0.05)
     np.testing.assert_allclose(np.diff(m.depth.stamp_s), 0.1)
     np.testing.assert_allclose(np.diff(m.truth.stamp_s), 0.02)
     speed = np.linalg.norm(m.truth.velocity_body_mps, axis=1)
@@ -141,10 +131,10 @@ def test_mission_round_trips_through_disk(tmp_path, tiny_mission):
     out = write_mission(m, tmp_path / "m")
     r = read_mission(out)
     assert r.directory == out and r.seed == 7 and r.scan_clouds is None
-    assert json.dumps(r.config, sort_keys=True) == json.dumps(m.config, sort_keys=True, default=list)
-    np.testing.assert_array_equal(r.T_vehicle_scanner.matrix, m.T_vehicle_scanner.matrix)
+    assert json.dumps(r.metadata, sort_keys=True) == json.dumps(m.metadata, sort_keys=True, default=list)
+    np.testing.assert_array_equal(r.vehicle.scanner.T_vehicle_scanner.matrix, m.vehicle.scanner.T_vehicle_scanner.matrix)
     for a, b in [(r.dvl.stamp_s, m.dvl.stamp_s), (r.dvl.velocity_body_mps, m.dvl.velocity_body_mps), (r.dvl.valid, m.dvl.valid),
-                 (r.ahrs.rpy_rad, m.ahrs.rpy_rad), (r.depth.depth_m, m.depth.depth_m),
+                 (r.attitude.rpy_rad, m.attitude.rpy_rad), (r.depth.depth_m, m.depth.depth_m),
                  (r.truth.position_ned_m, m.truth.position_ned_m), (r.truth.velocity_body_mps, m.truth.velocity_body_mps)]:
         np.testing.assert_array_equal(a, b)
     assert [(o.name, o.label, o.in_database) for o in r.objects] == [(o.name, o.label, o.in_database) for o in m.objects]
@@ -155,7 +145,7 @@ def test_mission_round_trips_through_disk(tmp_path, tiny_mission):
     a, b = r.load_scan(3), m.load_scan(3)
     np.testing.assert_allclose(a.points_xyz_m, b.points_xyz_m, atol=1e-5)  # float32 on disk
     np.testing.assert_array_equal(a.fields["instance"], b.fields["instance"])
-    with pytest.raises(MissionError, match="scan_id"):
+    with pytest.raises(DatasetError, match="scan_id"):
         r.load_scan(10_000)
 
 
@@ -166,39 +156,39 @@ def _corrupt(src: Path, dst: Path) -> Path:
 
 def test_malformed_missions_raise_mission_errors(tmp_path, tiny_mission):
     good = write_mission(tiny_mission, tmp_path / "good")
-    with pytest.raises(MissionError, match="does not exist"):
+    with pytest.raises(DatasetError, match="does not exist"):
         read_mission(tmp_path / "nothing")
     d = _corrupt(good, tmp_path / "d1")
     (d / "dvl.csv").unlink()
-    with pytest.raises(MissionError, match="dvl.csv"):
+    with pytest.raises(DatasetError, match="dvl.csv"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d2")
     (d / "ahrs.csv").write_text("stamp_s,roll,pitch,yaw\n0,0,0,0\n")
-    with pytest.raises(MissionError, match="header"):
+    with pytest.raises(DatasetError, match="header"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d3")
     (d / "depth.csv").write_text("stamp_s,depth_m\n0.0,abc\n")
-    with pytest.raises(MissionError, match="depth.csv.*line 2.*depth_m"):
+    with pytest.raises(DatasetError, match="depth.csv.*line 2.*depth_m"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d4")
     meta = json.loads((d / "mission.json").read_text())
     meta["format_version"] = 99
     (d / "mission.json").write_text(json.dumps(meta))
-    with pytest.raises(MissionError, match="format_version"):
+    with pytest.raises(DatasetError, match="format_version"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d5")
     (d / "mission.json").write_text("{not json")
-    with pytest.raises(MissionError, match="JSON"):
+    with pytest.raises(DatasetError, match="JSON"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d6")
     (d / tiny_mission.scans[0].path).unlink()
-    with pytest.raises(MissionError, match="scan_00000.pcd"):
+    with pytest.raises(DatasetError, match="scan_00000.pcd"):
         read_mission(d)
     d = _corrupt(good, tmp_path / "d7")
     (d / "depth.csv").write_text("stamp_s,depth_m\n1.0,5\n0.5,5\n")
-    with pytest.raises(MissionError, match="sorted"):
+    with pytest.raises(DatasetError, match="sorted"):
         read_mission(d)
-    with pytest.raises(MissionError, match="must not exist"):
+    with pytest.raises(DatasetError, match="must not exist"):
         write_mission(tiny_mission, good)
 
 

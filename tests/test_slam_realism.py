@@ -11,8 +11,9 @@ import pytest
 from semslam.simulation import DvlConfig, SimulatorConfig, TrajectoryConfig, simulate_mission
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.simulation.sensors import gauss_markov
-from semslam.slam import SlamConfig, run_slam
-from semslam.experiments.synthetic import square_mission
+from semslam.slam import SlamConfig
+from semslam.run import run_slam
+from semslam.simulation.synthetic import square_mission
 
 
 def test_gauss_markov_matches_its_analytic_statistics():
@@ -92,7 +93,7 @@ def test_observability_constraint_keeps_a_constant_yaw_bias_unobservable():
     # without surveyed landmarks a constant yaw bias is unobservable (rotating trajectory + map about the
     # start and shifting the bias changes no measurement): the constrained filter gains no information on it
     # and leaves its estimate at the prior, the plain EKF gains spurious information and wanders
-    from semslam.experiments.synthetic import square_mission
+    from semslam.simulation.synthetic import square_mission
 
     m = square_mission(seed=4, loops=2)
     runs = {}

@@ -21,9 +21,10 @@ from semslam.slam.consensus import (
     quaternion_mean,
 )
 from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
-from semslam.slam.detections import read_detections_jsonl, write_detections_jsonl
-from semslam.slam import SlamConfig, run_slam
-from semslam.experiments.synthetic import square_mission
+from semslam.io.detections import read_detections_jsonl, write_detections_jsonl
+from semslam.slam import SlamConfig
+from semslam.run import run_slam
+from semslam.simulation.synthetic import square_mission
 
 
 def test_consensus_rejects_minority_outlier():

@@ -9,9 +9,11 @@ import pytest
 from semslam.geometry import rotation_from_rpy
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.slam.ekf import SemanticEkf
-from semslam.slam import SlamConfig, run_slam, write_run
+from semslam.slam import SlamConfig
+from semslam.run import run_slam
+from semslam.run.rundir import write_run
 from semslam.slam.smoother import RtsRecorder
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 
 
 def _script(seed=0, n_steps=120):

@@ -12,10 +12,11 @@ import pytest
 from semslam.dataset import PositionFixLog
 from semslam.detection import Detection
 from semslam.errors import SimulationError
-from semslam.experiments.synthetic import square_mission
+from semslam.simulation.synthetic import square_mission
 from semslam.geometry import RigidTransform
-from semslam.slam import SlamConfig, initial_state, run_slam
-from semslam.slam.runner import merged_messages
+from semslam.slam import SlamConfig, initial_state
+from semslam.run import run_slam
+from semslam.run.dataset_loop import merged_messages
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,8 @@ from semslam.dataset import AttitudeLog, Dataset, DepthLog, DvlLog, ScanRecord, 
 from semslam.errors import InputError
 from semslam.geometry import RigidTransform
 from semslam.io import read_point_cloud
-from semslam.pipeline import PipelineConfig, ScanRecognizer, detect_mission
+from semslam.pipeline import PipelineConfig, ScanRecognizer
+from semslam.pipeline.mission import detect_mission
 from semslam.pipeline.mission import MAX_ATTITUDE_GAP_S, up_in_scanner
 from semslam.recognition import load_database
 

@@ -12,7 +12,7 @@ import pytest
 
 from semslam.cloud import PointCloud
 from semslam.errors import DescriptorError
-from semslam.experiments.synthetic_views import synthetic_shape_views
+from semslam.simulation.synthetic_views import synthetic_shape_views
 from semslam.recognition import Recognizer, build_database, compute_view_descriptors
 from semslam.recognition.view_descriptors import (AUTO, DEFAULT_NORMAL_RADIUS_M, DEFAULT_VOXEL_LEAF_M,
                                                   NORMAL_EXTENT_FRACTION, default_normal_radius,

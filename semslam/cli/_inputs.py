@@ -16,7 +16,7 @@ def load_dataset(spec: str, vehicle: str | None = None):
     from ..dataset import VehicleDescription, read_mission, read_vehicle_toml
 
     if spec.startswith("synthetic:"):
-        from ..experiments.synthetic import square_mission
+        from ..simulation.synthetic import square_mission
 
         try:
             seed = int(spec.split(":", 1)[1])

@@ -1,6 +1,6 @@
 """``--tls-ca-file --tls-cert --tls-key`` of the commands that take ``--scheduler`` (``batch``, ``montecarlo``), as
 ``dask scheduler`` takes them; the command runs its work inside
-:func:`semslam.experiments._dask.scheduler_tls`. Pure argparse: building the parser imports nothing else."""
+:func:`semslam.batch.engine.scheduler_tls`. Pure argparse: building the parser imports nothing else."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``semslam batch DIVES... --db DB --out RUNS``: ``semslam run`` on many dives (bags or mission directories) as Dask
 tasks, one run directory per dive, then RUNS/summary.csv, summary.md, index.html (see
-:mod:`semslam.experiments.batch`). Default engine: a local cluster of one worker process per core (``--workers``);
+:mod:`semslam.batch.dives`). Default engine: a local cluster of one worker process per core (``--workers``);
 ``--scheduler ADDRESS``: an existing Dask cluster whose workers see the same files."""
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def process_dive(dive: Path, out: Path, options: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments._dask import scheduler_tls
+    from ..batch.engine import scheduler_tls
 
     with scheduler_tls(args.scheduler, getattr(args, "tls_ca_file", None), getattr(args, "tls_cert", None),
                        getattr(args, "tls_key", None)):
@@ -74,8 +74,8 @@ def _run_batch(args: argparse.Namespace) -> int:
     import sys
 
     from ..errors import InputError
-    from ..experiments._dask import check_jobs
-    from ..experiments.batch import INDEX, SUMMARY_MD, run_batch, table_rows, markdown
+    from ..batch.engine import check_jobs
+    from ..batch.dives import INDEX, SUMMARY_MD, run_batch, table_rows, markdown
     from ._inputs import run_config_from_args
     from ._output import emit
 
@@ -89,7 +89,7 @@ def _run_batch(args: argparse.Namespace) -> int:
                          "which is not a file.")
     jobs = check_jobs(args.workers, "--workers") if args.workers is not None else None
     if jobs is None and not args.scheduler:
-        from ..experiments._dask import machine_workers
+        from ..batch.engine import machine_workers
 
         jobs = machine_workers()
     options = {"db": str(Path(args.db).resolve()) if args.db != "builtin" else "builtin", "modes": list(modes),

@@ -123,7 +123,7 @@ def run_build(args: argparse.Namespace) -> int:
     if args.jobs != 1 or args.scheduler:
         from functools import partial
 
-        from ..experiments._dask import check_jobs
+        from ..batch.engine import check_jobs
 
         kwargs["mapper"] = partial(_dask_mapper, jobs=check_jobs(args.jobs), scheduler=args.scheduler)
     if (args.builtin or args.models is not None) and (args.fuse or args.up is not None):
@@ -158,7 +158,7 @@ def run_build(args: argparse.Namespace) -> int:
         db, warned = _build_from_models(args, kwargs)
         source = str(args.models)
     elif args.fuse:
-        from ..pipeline.fuse import build_fused_database
+        from ..recognition.fuse import build_fused_database
 
         if kwargs.pop("mapper", None) is not None:
             raise InputError("--fuse computes the descriptors in this process: drop --jobs/--scheduler.")
@@ -183,7 +183,7 @@ def run_build(args: argparse.Namespace) -> int:
 
 def _dask_mapper(fn, items, progress, *, jobs: int, scheduler: str | None):
     """``build_database``'s ``mapper`` on Dask (a local cluster of ``jobs`` workers, or ``scheduler``'s)."""
-    from ..experiments._dask import map_tasks
+    from ..batch.engine import map_tasks
 
     return map_tasks(fn, items, jobs=jobs, scheduler=scheduler, progress=progress, desc="descriptors")
 

@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from ..descriptors import compute_esf, compute_fpfh, compute_vfh, estimate_normals
+    from ..descriptors import compute_esf, compute_vfh, estimate_normals
+    from ..descriptors.fpfh import compute_fpfh
     from ..errors import InputError
     from ..io import read_point_cloud
     from ._output import emit

@@ -1,5 +1,5 @@
 """``semslam detect MISSION --db DB --out detections.jsonl``: every scan of a dataset through the recognition
-pipeline (:func:`semslam.pipeline.detect_mission`), one detection per JSON line, ready for
+pipeline (:func:`semslam.pipeline.mission.detect_mission`), one detection per JSON line, ready for
 ``semslam slam MISSION --detections detections.jsonl``."""
 
 from __future__ import annotations
@@ -37,9 +37,10 @@ def run(args: argparse.Namespace) -> int:
     from .._atomic import atomic_write_text
     from .._outdir import check_output_file, staged_output_file
     from ..errors import InputError
-    from ..pipeline import ScanRecognizer, detect_mission
+    from ..pipeline import ScanRecognizer
+    from ..pipeline.mission import detect_mission
     from ..recognition import load_database
-    from ..slam import write_detections_jsonl
+    from ..io.detections import write_detections_jsonl
     from ._inputs import load_dataset, run_config_from_args
     from ._output import emit, to_jsonable
 

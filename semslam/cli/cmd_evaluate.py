@@ -27,7 +27,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..recognition import build_database_from_folder, leave_one_out, load_database
+    from ..recognition import build_database_from_folder, load_database
+    from ..evaluation.classifier import leave_one_out
     from ._output import emit
 
     source = Path(args.source)

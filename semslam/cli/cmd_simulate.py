@@ -39,8 +39,9 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .._outdir import check_output_dir, check_output_file, staged_output_file
-    from ..errors import MissionError
-    from ..simulation import SimulatorConfig, simulate_mission, write_mission
+    from ..errors import DatasetError
+    from ..simulation import SimulatorConfig, simulate_mission
+    from ..dataset import write_mission
     from ..simulation.simulate import DEFAULT_SCAN_INTERVAL_S
     from ._output import emit
 
@@ -49,13 +50,13 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "ros1":
         check_output_file(args.out, overwrite=args.overwrite)
         if not args.out.endswith(".bag"):
-            raise MissionError(f"A ROS 1 bag's name must end in .bag. Got {args.out!r} instead.")
+            raise DatasetError(f"A ROS 1 bag's name must end in .bag. Got {args.out!r} instead.")
     else:
         check_output_dir(args.out, overwrite=args.overwrite, kind="bag" if companions else "mission")
     for c in companions:
         check_output_file(c, overwrite=args.overwrite)
     if Path(args.out).exists() and not args.overwrite:
-        raise MissionError(f"The output directory {args.out!r} already exists. Use --overwrite to replace it.")
+        raise DatasetError(f"The output directory {args.out!r} already exists. Use --overwrite to replace it.")
     cfg = SimulatorConfig.quick() if args.quick else SimulatorConfig()
     if args.loops is not None:
         cfg = cfg.replace(trajectory=dataclasses.replace(cfg.trajectory, loops=args.loops))
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     payload = {
         "directory": str(out), "format": args.format, "seed": args.seed, "duration_s": mission.duration_s, "n_scans": len(mission.scans),
         "n_points": n_points, "n_objects": len(mission.objects),
-        "n_dvl": len(mission.dvl.stamp_s), "n_ahrs": len(mission.ahrs.stamp_s), "n_depth": len(mission.depth.stamp_s),
+        "n_dvl": len(mission.dvl.stamp_s), "n_ahrs": len(mission.attitude.stamp_s), "n_depth": len(mission.depth.stamp_s),
     }
     emit(args, payload, lambda: (
         f"wrote {out}: {mission.duration_s:.1f} s, {len(mission.scans)} scans ({n_points} points), "

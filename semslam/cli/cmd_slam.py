@@ -79,8 +79,10 @@ def run(args: argparse.Namespace) -> int:
     from .._outdir import staged_output_dir
     from ..errors import InputError
     from ..run.config import write_resolved_config
-    from ..slam import read_detections_jsonl, run_slam, write_run
-    from ..slam.rundir import mode_dir
+    from ..io.detections import read_detections_jsonl
+    from ..run import run_slam
+    from ..run.rundir import write_run
+    from ..run.rundir import mode_dir
     from ._inputs import load_dataset, run_config_from_args
     from ._output import emit
 
@@ -129,10 +131,10 @@ def run(args: argparse.Namespace) -> int:
             where = mode_dir(out, mode) if len(modes) > 1 else out
             write_run(res, where)
             if args.export:
-                from ..slam.export import export_run
+                from ..run.export import export_run
 
                 export_run(res, where, detections_by_scan=dets or None,
-                           T_vehicle_scanner=mission.T_vehicle_scanner if dets else None)
+                           T_vehicle_scanner=mission.vehicle.scanner.T_vehicle_scanner if dets else None)
             payload[mode] = res.metrics
         write_resolved_config(rc, out)  # RUN/config.toml: every setting, the preset named
     out = final
@@ -151,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_montecarlo_cmd(args: argparse.Namespace) -> int:
-    from ..experiments._dask import scheduler_tls
+    from ..batch.engine import scheduler_tls
 
     with scheduler_tls(args.scheduler, getattr(args, "tls_ca_file", None), getattr(args, "tls_cert", None),
                        getattr(args, "tls_key", None)):

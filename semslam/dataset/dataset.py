@@ -1,8 +1,8 @@
 """A dive as semslam consumes it: the vehicle description, navigation logs, scans and optional ground truth.
 
 :class:`Dataset` is the data contract between every producer (the simulator, a mission directory, a ROS bag,
-numpy arrays) and every consumer (:func:`semslam.pipeline.detect_mission`, :class:`semslam.slam.SlamSession`,
-:func:`semslam.slam.run_slam`). Build one in Python from arrays::
+numpy arrays) and every consumer (:func:`semslam.pipeline.mission.detect_mission`, :class:`semslam.slam.SlamSession`,
+:func:`semslam.run.run_slam`). Build one in Python from arrays::
 
     from semslam.dataset import Dataset, DvlLog, AttitudeLog, DepthLog, VehicleDescription
     ds = Dataset(VehicleDescription.girona500(), DvlLog(t, v, valid), AttitudeLog(t_a, rpy), DepthLog(t_d, z))
@@ -74,19 +74,6 @@ class Dataset:
             raise DatasetError(f"The DVL log has {beams.shape[1]} beam ranges per row but the vehicle description "
                                f"has {n_az} beam azimuths.")
 
-    # -- compatibility with the former simulator-owned Mission ---------------------------------------
-    @property
-    def ahrs(self) -> AttitudeLog:
-        return self.attitude
-
-    @property
-    def T_vehicle_scanner(self) -> RigidTransform:
-        return self.vehicle.scanner.T_vehicle_scanner
-
-    @property
-    def config(self) -> dict:
-        return self.metadata
-
     @property
     def duration_s(self) -> float:
         stamps = [s for s in (self.dvl.stamp_s, self.attitude.stamp_s, self.depth.stamp_s) if len(s)]
@@ -134,4 +121,3 @@ class Dataset:
 
 
 #: The former name, kept for code written against the simulator's mission type.
-Mission = Dataset

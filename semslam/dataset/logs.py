@@ -100,7 +100,6 @@ class AttitudeLog:
 
 
 #: The AHRS is the attitude source of a Girona 500-class vehicle; the former name of :class:`AttitudeLog`.
-AhrsLog = AttitudeLog
 
 
 @dataclass(frozen=True, eq=False)

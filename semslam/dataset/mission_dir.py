@@ -1,5 +1,5 @@
 """Mission directories: the on-disk form of a :class:`~semslam.dataset.Dataset` (format version 2; version 1,
-written by semslam <= 0.1, still reads). Documented in docs/mission-format.md.
+written by semslam <= 0.1, is refused with a one-line error). Documented in docs/mission-format.md.
 
 ::
 
@@ -41,7 +41,7 @@ from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, Sc
 from .vehicle import VehicleDescription, read_vehicle_toml, write_vehicle_toml
 
 FORMAT_VERSION = 2
-SUPPORTED_VERSIONS = (1, 2)
+SUPPORTED_VERSIONS = (2,)
 
 _DVL = ("stamp_s", "vx_mps", "vy_mps", "vz_mps", "valid")
 _AHRS = ("stamp_s", "roll_rad", "pitch_rad", "yaw_rad")
@@ -202,11 +202,15 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DatasetError(f"The mission file {str(meta_path)!r} is not valid JSON: {exc}") from None
+    if isinstance(meta, dict) and meta.get("format_version") == 1:
+        raise DatasetError(f"The mission file {str(meta_path)!r} has format_version 1 (semslam <= 0.1), which this "
+                           f"semslam no longer reads: simulate the dive again, or write the dataset again with "
+                           f"semslam.dataset.write_mission.")
     if not isinstance(meta, dict) or meta.get("format_version") not in SUPPORTED_VERSIONS:
         got = meta.get("format_version") if isinstance(meta, dict) else meta
         raise DatasetError(f"The mission file {str(meta_path)!r} must have format_version in {SUPPORTED_VERSIONS}. Got {got!r} instead.")
     try:
-        vehicle = _read_vehicle(d, meta, meta_path)
+        vehicle = read_vehicle_toml(d / "vehicle.toml")
         dv = _floats(d / "dvl.csv", _DVL, extra_prefix="range_")
         dvl = _log(d / "dvl.csv", DvlLog, dv[:, 0], dv[:, 1:4], _valid(dv[:, 4], d / "dvl.csv"),
                    dv[:, 5:] if dv.shape[1] > 5 else None)
@@ -258,24 +262,10 @@ def _valid(col: np.ndarray, path: Path) -> np.ndarray:
     return col == 1
 
 
-def _read_vehicle(d: Path, meta: dict, meta_path: Path) -> VehicleDescription:
-    """Version 2: ``vehicle.toml``. Version 1 recorded the simulator's sensor specification in
-    ``mission.json``: it becomes the vehicle description (the data-sheet figures only, never a draw)."""
-    if meta["format_version"] >= 2:
-        return read_vehicle_toml(d / "vehicle.toml")
-    try:
-        T_vs = RigidTransform(np.asarray(meta["T_vehicle_scanner"]["matrix"], dtype=float))
-    except (KeyError, TypeError, ValueError, SemslamError) as exc:
-        raise DatasetError(f"The mission file {str(meta_path)!r} must hold a valid T_vehicle_scanner matrix: {exc}") from None
-    sim = meta.get("simulator")
-    return vehicle_from_simulator_dict(sim if isinstance(sim, dict) else {}, T_vs, source=str(meta_path))
-
-
 def vehicle_from_simulator_dict(sim: dict, T_vehicle_scanner: RigidTransform, *,
                                 source: str = "simulator settings") -> VehicleDescription:
     """The vehicle description implied by semslam's simulator settings (``SimulatorConfig.to_dict()``): the
-    noise figures and geometry the simulated sensors were specified with. Used for version-1 mission
-    directories and by the simulator itself."""
+    noise figures and geometry the simulated sensors were specified with (the simulator's own vehicle file)."""
     def sec(name):
         v = sim.get(name) or {}
         if not isinstance(v, dict):

@@ -3,8 +3,8 @@ plus the measured point spacing that makes their settings scale-free.
 
 See /work/shared/design/pcl-algorithms.md for the PCL behaviour reproduced here.
 
-The FPFH (only the RANSAC registration uses it) is imported on first use (PEP 562): recognising a scan does not
-load its kernels.
+The FPFH (only the RANSAC registration uses it) is imported from :mod:`semslam.descriptors.fpfh`: recognising a
+scan does not load its kernels.
 """
 
 from .esf import ESF_SIZE, compute_esf, glibc_rand
@@ -20,8 +20,6 @@ __all__ = [
     "VFH_SIZE",
     "VFH_VARIANTS",
     "compute_esf",
-    "compute_fpfh",
-    "compute_spfh",
     "compute_vfh",
     "estimate_normals",
     "find_neighbors",
@@ -29,14 +27,3 @@ __all__ = [
     "point_spacing_m",
 ]
 
-
-def __getattr__(name: str):
-    if name in ("compute_fpfh", "compute_spfh"):
-        from . import fpfh
-
-        return getattr(fpfh, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))

@@ -1,5 +1,5 @@
 """Numba kernels of FPFH over radius neighbourhoods streamed from the grid search, without storing them.
-Don't call directly; use :func:`semslam.descriptors.compute_fpfh`.
+Don't call directly; use :func:`semslam.descriptors.fpfh.compute_fpfh`.
 
 Memory is O(N) (the grid, the SPFH and the FPFH histograms) instead of 16 bytes per neighbour pair
 of the compressed-row neighbourhoods (~1 GB for a dense 90k-point scan). Neighbours come in

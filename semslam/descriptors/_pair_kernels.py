@@ -1,5 +1,5 @@
 """Numba kernels of PCL's point-pair features, SPFH and FPFH. Don't call directly; use
-:func:`semslam.descriptors.compute_fpfh`."""
+:func:`semslam.descriptors.fpfh.compute_fpfh`."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Fixed-radius and k-nearest neighbourhoods in compressed-row form, shared by normals and FPFH.
 
 One :class:`Neighborhoods` can be computed once (:func:`find_neighbors`) and passed to both
-:func:`~semslam.descriptors.estimate_normals` and :func:`~semslam.descriptors.compute_fpfh` when they
+:func:`~semslam.descriptors.estimate_normals` and :func:`~semslam.descriptors.fpfh.compute_fpfh` when they
 use the same search parameter.
 """
 

@@ -1,7 +1,7 @@
 """Seeded Monte-Carlo evaluation: N missions, each run in several modes; ATE and ANEES with chi-square bands.
 
 Missions come from the simulator (``semslam.simulation.simulate_mission(config, seed=..., with_scans=False)``)
-when it is available, else from :func:`semslam.experiments.synthetic.square_mission`. Run ``i`` uses seed
+when it is available, else from :func:`semslam.simulation.synthetic.square_mission`. Run ``i`` uses seed
 ``seed + i`` for the mission and the truth-based detections, so every mode sees the same missions.
 """
 
@@ -22,7 +22,7 @@ from .._validation import check_int
 from ..errors import SlamError
 from ..simulation.truth_slam import run_truth_slam
 from ..slam import MODES, SlamConfig
-from ..slam.metrics import anees, chi2_band, nees
+from ..evaluation.metrics import anees, chi2_band, nees
 
 
 def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
@@ -44,7 +44,7 @@ def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", 
         if white_dvl:
             cfg = cfg.replace(dvl=DvlConfig.white())
         return simulate_mission(cfg, seed=seed, with_scans=False)
-    from .synthetic import square_mission
+    from ..simulation.synthetic import square_mission
 
     return square_mission(seed=seed, yaw_bias_rad=yaw_bias_rad, loops=loops)
 
@@ -143,7 +143,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     objects given to every run as a survey (drawn around their true poses, as a surveyor's, seeded per run);
     ``progress``: a bar or ``progress(done, total)`` per run and mode (:mod:`semslam._progress`); ``log``: one line
     per run and mode (its ATE). ``jobs`` / ``scheduler`` / ``client``: the engine (serial in this process, a local Dask
-    cluster of ``jobs`` processes, a running cluster; :func:`semslam.experiments._dask.map_tasks`): same result.
+    cluster of ``jobs`` processes, a running cluster; :func:`semslam.batch.engine.map_tasks`): same result.
     ``backend``: the estimator (``ekf``; ``isam2`` or ``batch``: the GTSAM factor graph, whose smoothed trajectory
     is its whole-dive estimate), with the same missions and detections for every backend; the result's
     ``end_error_runs`` holds the error of that whole-dive estimate (the EKF's: its RTS smoother) per run and epoch.
@@ -179,7 +179,7 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
                 if log is not None:
                     log(f"run {i + 1}/{n_runs} {mode}: ATE {run[mode]['metrics']['ate_rmse_m']:.4f} m")
 
-        from ._dask import map_tasks
+        from ..batch.engine import map_tasks
 
         runs = map_tasks(partial(_montecarlo_run, opts=opts), range(n_runs), jobs=jobs, scheduler=scheduler,
                          client=client, on_result=done)

@@ -19,7 +19,7 @@ from ..dataset import Dataset, DvlLog
 from ..errors import SlamError
 from ..simulation.truth_slam import run_truth_slam
 from ..slam import MODES, SlamConfig
-from ..slam.metrics import anees, chi2_band, nees
+from ..evaluation.metrics import anees, chi2_band, nees
 from .montecarlo import make_mission
 
 #: scenario -> (start, end) of the outage as fractions of the DVL log's time span

@@ -1,7 +1,7 @@
 """Outlier detections for robustness studies (issue 17): corrupt a seeded fraction of a run's detections with a wrong
 class label or a displaced pose, and count how many of them the filter / graph actually used.
 
-:func:`corrupt_detections` post-processes the ``{scan_id: [Detection]}`` dict that :func:`semslam.slam.run_slam`
+:func:`corrupt_detections` post-processes the ``{scan_id: [Detection]}`` dict that :func:`semslam.run.run_slam`
 takes (from :func:`semslam.simulation.detections.simulate_detections` or a recogniser): exactly
 ``round(fraction * n)`` of the mission's ``n`` detections, drawn without replacement, are corrupted. The corrupted
 detection keeps its nominal covariance (the recogniser does not know it is wrong: that is what makes it an

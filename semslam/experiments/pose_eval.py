@@ -51,7 +51,7 @@ def mission_clusters(mission, *, voxel_m: float = 0.005, min_points: int = 30) -
             if len(pts) < min_points:
                 continue
             t = float(np.median(stamps[sel]))
-            T_ws = T_world_scanner_at(mission.truth, mission.T_vehicle_scanner, t)
+            T_ws = T_world_scanner_at(mission.truth, mission.vehicle.scanner.T_vehicle_scanner, t)
             T = (T_ws.inverse() @ obj.T_world_object).matrix
             out.append(EvalCluster(obj.label, pts, T, objects[obj.label].symmetry, rec.scan_id, mission.seed or 0))
     return out
@@ -129,7 +129,7 @@ class EvalRow:
 
 def evaluate(clusters, models: dict, *, seed: int = 0, **kwargs) -> list[EvalRow]:
     """Run :func:`estimate_object_pose` on every cluster with ``models[label]`` (PoseModel)."""
-    from ..registration.pose import estimate_object_pose
+    from ..pose.estimate import estimate_object_pose
 
     rows = []
     for i, c in enumerate(clusters):

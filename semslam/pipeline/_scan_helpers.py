@@ -11,7 +11,7 @@ import numpy as np
 
 from ..cloud import PointCloud
 from ..detection import Detection
-from ..registration.pose import estimate_object_pose
+from ..pose.estimate import estimate_object_pose
 from ..recognition.plausibility import max_plausible_extent_m, principal_extent, scan_angular_extent
 from ..segmentation.scene import SegmentationResult
 
@@ -59,7 +59,7 @@ def _valid_points(scan: PointCloud, drop_origin: bool) -> np.ndarray:
 def _scan_angular_extent(points_xyz_m: np.ndarray, viewpoint_xyz_m: Any) -> np.ndarray:
     """:func:`~semslam.recognition.plausibility.scan_angular_extent` (4,) in one pass over the scan (a numba
     kernel: ~1 ms instead of ~8 ms on 100k points; equal to within 1e-15 rad)."""
-    from .._pipeline_kernels import scan_angular_extent as kernel
+    from ..recognition._plausibility_kernels import scan_angular_extent as kernel
 
     if len(points_xyz_m) == 0:
         return scan_angular_extent(points_xyz_m, viewpoint_xyz_m)
@@ -70,7 +70,7 @@ def _scan_angular_extent(points_xyz_m: np.ndarray, viewpoint_xyz_m: Any) -> np.n
 def _input_indices(seg: SegmentationResult, k: int) -> np.ndarray:
     """``seg.input_indices(k)`` (same sorted int64 array) by a numba kernel: ~0.1 ms instead of ~0.5 ms on 100k
     input points."""
-    from .._pipeline_kernels import selected_input_indices
+    from ._kernels import selected_input_indices
 
     if seg.point_voxel is None:
         return seg.input_indices(k)
@@ -148,9 +148,9 @@ def _verification_failure(det: Detection, min_fitness: float | None, max_visibil
 def _scene_visibility(rec: Any, scan: PointCloud, seg: SegmentationResult | None, points: np.ndarray, model: Any,
                       T_scanner_object: Any) -> float:
     """The visibility cost of a pose against the whole scan about the cluster (``verify_visibility_image="scene"``,
-    :meth:`~semslam.registration.search.RangeImage.build_scene`): the segmented scan (planes included) for the free
+    :meth:`~semslam.pose.search.RangeImage.build_scene`): the segmented scan (planes included) for the free
     space, its clusters as the only surfaces that may hide the object. NaN when the model has no visibility points."""
-    from ..registration.search import RangeImage
+    from ..pose.search import RangeImage
 
     if model.visibility_points is None or not len(model.visibility_points):
         return float("nan")

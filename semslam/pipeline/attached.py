@@ -257,7 +257,7 @@ def remove_structure(points_xyz_m: np.ndarray, normals_xyz: np.ndarray, *, toler
 
 def _input_indices_of(seg: Any, idx: np.ndarray) -> np.ndarray:
     """Sorted indices into the scan of the points averaged into the segmented-cloud rows ``idx``."""
-    from .._pipeline_kernels import selected_input_indices
+    from ._kernels import selected_input_indices
 
     idx = np.sort(np.asarray(idx, dtype=np.int64))
     if seg.point_voxel is None:

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._validation import check_choice, check_positive
 from ..errors import InputError
-from ..registration.pose_model import PoseConfig
+from ..pose.model import PoseConfig
 from ..segmentation.scene import SegmentationConfig
 from .attached import AttachedConfig
 from .parts import PartsConfig
@@ -82,7 +82,7 @@ class PipelineConfig:
     up_scanner : (3,) or None
         The up direction in the scanner frame (a level camera with y down: ``(0, -1, 0)``; a vehicle: from its
         attitude). For the classes whose database records their up direction (``db build --fuse --up``), the
-        pose search then keeps the object upright (:func:`~semslam.registration.estimate_object_pose`'s
+        pose search then keeps the object upright (:func:`~semslam.pose.estimate_object_pose`'s
         ``up_scanner``/``up_object``), which resolves the half-turn flips of near-symmetric objects;
         ``extras["pose_upright"]`` says whether it did. None (default): the search spans all of SO(3).
     verify_min_fitness, verify_max_visibility : float or None

@@ -1,6 +1,6 @@
 """The one loop over a dataset's scans: every scan through a :class:`~semslam.pipeline.scan.ScanRecognizer`,
 each detection stamped with its own points' acquisition time, the detections kept for SLAM as
-``{scan_id: [Detection]}`` (the form :func:`semslam.slam.run_slam` and ``detections.jsonl`` take).
+``{scan_id: [Detection]}`` (the form :func:`semslam.run.run_slam` and ``detections.jsonl`` take).
 
 Scoring against ground truth is a separate pass (``on_scan`` receives every scan's cloud and result).
 """

@@ -146,7 +146,7 @@ def _candidate_unions(n: int, gaps: dict, cfg: PartsConfig) -> list[tuple[int, .
 
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
     """Share of each part's points within ``icp_max_correspondence_m`` of the model under ``det``'s pose."""
-    from ..registration.pose_model import _nearest
+    from ..pose.model import _nearest
 
     model = rec.pose_model(label, view_index)
     bound = float(model.config.icp_max_correspondence_m)

@@ -33,7 +33,7 @@ from ..recognition import (
     combine_descriptors,
 )
 from ..recognition.plausibility import border_touched, principal_extent
-from ..registration.pose import PoseModel, estimate_object_pose, prepare_pose_model
+from ..pose.estimate import PoseModel, estimate_object_pose, prepare_pose_model
 from ..segmentation.scene import SegmentationResult, segment_scene
 from .attached import find_attached
 from .config import PipelineConfig

@@ -12,7 +12,6 @@ from .build import build_database, build_database_from_folder
 from .database import FORMAT_NAME, FORMAT_VERSION, ClassInfo, ViewDatabase
 from .storage import load_database, save_database
 from .view_descriptors import ViewDescriptors, combine_descriptors, compute_view_descriptors
-from .evaluation import EvaluationResult, confusion_matrix, leave_one_out
 from .matching import Chi2NearestNeighbor, SvmClassifier, chi2_distances
 from .preprocessing import ViewPreprocessing
 from .recognizer import Match, Recognizer
@@ -29,7 +28,6 @@ __all__ = [
     "UNKNOWN_LABEL",
     "Chi2NearestNeighbor",
     "ClassInfo",
-    "EvaluationResult",
     "Match",
     "Recognizer",
     "RejectionThresholds",
@@ -43,8 +41,6 @@ __all__ = [
     "chi2_distances",
     "combine_descriptors",
     "compute_view_descriptors",
-    "confusion_matrix",
-    "leave_one_out",
     "load_database",
     "loo_same_class_distances",
     "save_database",

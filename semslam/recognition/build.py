@@ -74,7 +74,7 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         Classes without any keep their recognition views as pose model.
     mapper : callable, optional
         ``mapper(fn, items, progress) -> [fn(item) for item in items]`` in order: runs the views' descriptors
-        elsewhere (e.g. :func:`semslam.experiments._dask.map_tasks` on a Dask cluster); every view carries its own
+        elsewhere (e.g. :func:`semslam.batch.engine.map_tasks` on a Dask cluster); every view carries its own
         seed, so the database does not depend on it. Default: in this process.
     preprocessing : ViewPreprocessing or dict, optional
         What is done to every view before its descriptors (range limits, cleaning of sensor-origin points and
@@ -264,7 +264,7 @@ def build_database_from_folder(views_dir: str | Path, *, clean: bool = True,
     :class:`~semslam.recognition.preprocessing.ViewPreprocessing`, e.g. with range limits) replaces ``clean``.
     Other keyword arguments go to :func:`build_database`.
     Views recorded in their own sensor frames are fused into one object frame by
-    :func:`semslam.pipeline.fuse.build_fused_database` (``semslam db build --fuse``).
+    :func:`semslam.recognition.fuse.build_fused_database` (``semslam db build --fuse``).
     """
     if preprocessing is None:  # cleaned while read (errors name the file), recorded
         views, declared, meta_path = read_view_folder(views_dir, clean=clean)

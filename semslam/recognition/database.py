@@ -72,12 +72,8 @@ __all__ = [
     "ClassInfo",
     "ViewDatabase",
     "ViewDescriptors",
-    "build_database",
-    "build_database_from_folder",
     "compute_view_descriptors",
-    "load_database",
     "resolve_descriptor_lengths",
-    "save_database",
 ]
 
 
@@ -191,7 +187,7 @@ class ViewDatabase:
             raise DatabaseError(f"The class {label!r} is not in the database. Known classes: {', '.join(self.classes)}.") from None
 
     def symmetries(self) -> dict:
-        """``{class: Symmetry}``: what SLAM needs to know of each class (:func:`semslam.slam.run_slam`)."""
+        """``{class: Symmetry}``: what SLAM needs to know of each class (:func:`semslam.run.run_slam`)."""
         return {c: info.symmetry for c, info in self.class_infos.items()}
 
     def up_object(self, label: str) -> list | None:
@@ -404,17 +400,3 @@ def _check_model_arrays(db: ViewDatabase, where: str, error: type[SemslamError])
     unknown = set(labels.tolist()) - set(db.class_infos)
     if unknown:
         raise error(f"{where}: the pose-model views' classes {', '.join(sorted(unknown))} have no class entry.")
-
-
-#: building and file I/O live in their own modules; their names stay importable from here
-_LAZY = {"build_database": "build", "build_database_from_folder": "build", "read_view_folder": "build",
-         "folder_classes": "build", "POINT_FILE_SUFFIXES": "build", "save_database": "storage",
-         "load_database": "storage", "MAX_DECOMPRESSED_BYTES": "storage"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __package__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

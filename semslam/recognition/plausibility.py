@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _pipeline_kernels as K
+from . import _plausibility_kernels as K
 from .._validation import as_float_array, check_positive
 
 __all__ = ["cluster_extent_m", "max_plausible_extent_m", "scan_angular_extent", "size_plausible", "touches_scan_border"]

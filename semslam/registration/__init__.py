@@ -1,5 +1,6 @@
-"""Registration and pose estimation: prerejective RANSAC on FPFH (coarse), ICP with small_gicp (fine),
-pose covariance and symmetry handling for recognised objects.
+"""Pairwise registration of two clouds: prerejective RANSAC on FPFH (coarse), ICP with small_gicp (fine), the
+upright 4-DoF alignment, and the ambiguity of a result. The 6-DoF pose of a recognised object against its model
+(search, ICP, covariance, symmetries) is :mod:`semslam.pose`.
 
 >>> result = register(source_cloud, target_cloud, RegisterConfig(voxel_m=0.005))   # doctest: +SKIP
 >>> result.T_target_source, result.fitness, result.inlier_rmse_m                  # doctest: +SKIP
@@ -23,7 +24,3 @@ __all__ = [
     "prepare_icp_target",
     "register",
 ]
-
-from .pose import PoseConfig, PoseEstimate, PoseModel, estimate_object_pose, prepare_pose_model  # noqa: E402
-
-__all__ += ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "prepare_pose_model"]

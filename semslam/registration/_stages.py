@@ -89,7 +89,8 @@ def prepare(src_pts: np.ndarray, tgt_pts: np.ndarray, cfg, clock: Clock) -> dict
 
 def features(name: str, pts: np.ndarray, viewpoint: np.ndarray, cfg, voxel: float,
               clock: Clock) -> np.ndarray:
-    from ..descriptors import compute_fpfh, estimate_normals
+    from ..descriptors.fpfh import compute_fpfh
+    from ..descriptors import estimate_normals
 
     nrm = estimate_normals(pts, radius_m=cfg.resolved("normal_radius_m", voxel), viewpoint_xyz_m=viewpoint).normals_xyz
     if cfg.check_observability:

@@ -19,7 +19,7 @@ the object upside down; objects on a structure do not do that between two looks)
 
 The covariance is the point-to-plane Gauss-Newton one, ``rmse^2 (J^T J)^-1`` over (yaw, x, y, z), with
 the tilt taken from the stated uncertainty of the up vectors (``up_sigma_deg``), in the tangent
-convention of :mod:`semslam.registration.covariance` (rotation then translation, target frame).
+convention of :mod:`semslam.pose.covariance` (rotation then translation, target frame).
 """
 
 from __future__ import annotations

@@ -207,9 +207,9 @@ def section_graph_run(backend: str, trajs: dict, smoothed: dict, truth: dict, pl
 
 def build_backends_report(directory: str | Path) -> Path:
     """``report.html`` in ``directory`` from its error-over-time files (figures embedded, no ``figures/``)."""
-    from .build import _plt
+    from .plots import pyplot_agg
 
-    sections = backends_sections(directory, _plt())
+    sections = backends_sections(directory, pyplot_agg())
     if not sections:
         raise ReportError(f"nothing to report in {directory}: no error_over_time_*.csv there or one level below")
     summary = ("Monte-Carlo comparison of the estimators on the same seeded missions and detections (issue 17). "

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..errors import ReportError
 from .html import Section, write_report
+from .plots import pyplot_agg as _plt
 from .inputs import MODE_ORDER, _load_json, load_trajectory_csv
 from .recognition_sections import (_section_consensus, _section_detections, _section_fig3, _section_recognition,
                                    _section_tables)
@@ -31,15 +32,6 @@ from .slam_sections import _sections_slam
 from .summary import summary_section
 
 __all__ = ["build_report", "load_trajectory_csv"]
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _find_slam_runs(run_dir: Path) -> dict[str, Path]:

@@ -25,7 +25,7 @@ def _load_json(path: Path) -> dict | None:
 
 
 def load_trajectory_csv(path: Path) -> dict:
-    """Read a ``trajectory.csv`` written by :func:`semslam.slam.runner.write_run`."""
+    """Read a ``trajectory.csv`` written by :func:`semslam.run.dataset_loop.write_run`."""
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))

@@ -26,6 +26,16 @@ MODE_NAMES = {
 }
 
 
+def pyplot_agg():
+    """``matplotlib.pyplot`` on the Agg backend (no display), imported on first use."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def plot_confusion_matrix(ax, matrix: np.ndarray, labels: Sequence[str], *, title: str) -> None:
     """Confusion matrix (rows actual, columns predicted) as an annotated heat map of row percentages."""
     m = np.asarray(matrix, dtype=float)

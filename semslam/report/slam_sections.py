@@ -14,7 +14,7 @@ from .summary import human_label
 
 
 def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
-    from ..slam.metrics import chi2_band
+    from ..slam.consistency import chi2_band
     from .plots import plot_error_bounds, plot_smoothed_errors, plot_trajectories
 
     trajs = {mode: load_trajectory_csv(d / "trajectory.csv") for mode, d in runs.items()}

@@ -19,8 +19,10 @@ from typing import Any
 
 from .._atomic import atomic_write_text
 from .._jsonable import to_jsonable
-from ..slam import MODES, SlamConfig, write_detections_jsonl, write_run
-from ..slam.rundir import DETECTIONS, mode_dir
+from ..slam import MODES, SlamConfig
+from ..io.detections import write_detections_jsonl
+from .rundir import write_run
+from .rundir import DETECTIONS, mode_dir
 from .health import health_verdict
 from .runner import RunOutcome, run_stream
 from .sources import open_dive
@@ -48,7 +50,7 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
                          backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
                          up_from_attitude=up_from_attitude)
     # after the run: a mission directory's (or a dataset's) ground truth, when it has one, for the metrics only
-    from ..slam.evaluation import evaluate_results, load_reference
+    from ..evaluation.slam_run import evaluate_results, load_reference
 
     outcome.results = evaluate_results(outcome.results, load_reference(source), db.symmetries())
     return write_outcome(outcome, out, dive=dive, pipeline_config=recognizer.config, seed=seed, export=export)
@@ -69,7 +71,7 @@ def adopt_survey_frame(dive, survey) -> None:
 def write_outcome(outcome: RunOutcome, out: Path, *, dive, pipeline_config=None, seed: int = 0, export: bool = True,
                   extra: dict | None = None) -> dict:
     """Write a :class:`RunOutcome` as a run directory (see the module docstring) and return the CLI's payload."""
-    from ..slam.export import export_run
+    from .export import export_run
 
     out = Path(out)
     write_detections_jsonl(out / DETECTIONS, outcome.detections_by_scan)

@@ -24,7 +24,7 @@ from ..detection import Detection
 from ..errors import InputError
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
-from ..slam.runner import BACKENDS, make_session, with_start
+from .dataset_loop import BACKENDS, make_session, with_start
 from .messages import ORDER, Scan
 
 #: the shortest delay line (s); it grows to twice the longest scan span seen
@@ -70,7 +70,7 @@ class Runner:
     seed : int
         Scan ``k`` is recognised with seed ``seed * 100003 + k``.
     keep_unreliable, up_from_attitude : bool
-        As :func:`semslam.pipeline.detect_mission`.
+        As :func:`semslam.pipeline.mission.detect_mission`.
     on_scan : callable, optional
         ``on_scan(scan_message, kept_detections, stats, result)`` after each recognised scan.
     """
@@ -246,7 +246,7 @@ class Runner:
     # ------------------------------------------------------------------ output
     def finish(self) -> RunOutcome:
         """Process what is pending and return the :class:`RunOutcome` (no evaluation: that is
-        :func:`semslam.slam.evaluation.evaluate_results`, after the run, by whoever holds a reference)."""
+        :func:`semslam.evaluation.slam_run.evaluate_results`, after the run, by whoever holds a reference)."""
         if self._finished:
             raise InputError("Runner.finish was already called.")
         self._finished = True
@@ -288,7 +288,7 @@ def _feed(session, mode: str, kind: str, t: float, p) -> None:
 
 def run_stream(dive, **runner_kw) -> RunOutcome:
     """Every message of an opened dive (:func:`semslam.run.open_dive`) through a :class:`Runner`. Not evaluated:
-    :func:`semslam.slam.evaluation.evaluate_results` does that after the run, against a reference it loads."""
+    :func:`semslam.evaluation.slam_run.evaluate_results` does that after the run, against a reference it loads."""
     runner = Runner(dive.vehicle, **runner_kw)
     for msg in dive.messages():
         runner.feed(msg)

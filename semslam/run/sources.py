@@ -10,7 +10,7 @@ Frames are never guessed. A bag is read with the topic map and the vehicle file 
 the suggested topic map.
 
 Ground truth is not part of a dive: evaluation reads it after a run, from the source itself
-(:func:`semslam.slam.evaluation.load_reference`).
+(:func:`semslam.evaluation.slam_run.load_reference`).
 """
 
 from __future__ import annotations

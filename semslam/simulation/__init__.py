@@ -1,5 +1,5 @@
 """semslam.simulation: the simulator (object meshes, Kinect view database, CIRS-like tank, laser
-scanner, vehicle motion, navigation sensors) and the mission types and directory format."""
+scanner, vehicle motion, navigation sensors) writing datasets (and, through :mod:`semslam.io.ros`, bags). The data types are :mod:`semslam.dataset`."""
 
 from .catalogue import CATALOGUE_LABELS, catalogue_objects
 from .config import (
@@ -13,8 +13,6 @@ from .config import (
                      WorldConfig,
 )
 from .kinect import acquire_views, builtin_view_clouds, kinect_view
-from ..dataset import AhrsLog, AttitudeLog, DepthLog, DvlLog, Mission, ObjectTruth, ScanRecord, VehicleTruth
-from ..dataset import read_mission, write_mission
 from .objects import BUILTIN_LABELS, ObjectModel, builtin_objects, load_object, make_object
 from .scanner import LaserScanner, ScanResult
 from .simulate import MISSION_FORMAT_VERSION, simulate_mission
@@ -26,24 +24,17 @@ __all__ = [
                      "CATALOGUE_LABELS",
                      "MISSION_FORMAT_VERSION",
                      "AhrsConfig",
-                     "AhrsLog",
                      "DepthConfig",
-                     "DepthLog",
                      "DvlConfig",
-                     "DvlLog",
                      "KinectConfig",
                      "LaserScanner",
-                     "Mission",
                      "ObjectModel",
-                     "ObjectTruth",
-                     "ScanRecord",
                      "ScanResult",
                      "ScannerConfig",
                      "SimulatorConfig",
                      "Trajectory",
                      "TrajectoryConfig",
                      "TrajectorySample",
-                     "VehicleTruth",
                      "World",
                      "WorldConfig",
                      "acquire_views",
@@ -55,7 +46,5 @@ __all__ = [
                      "kinect_view",
                      "load_object",
                      "make_object",
-                     "read_mission",
                      "simulate_mission",
-                     "write_mission",
 ]

@@ -3,7 +3,7 @@
 The source looks at the ground-truth objects from the true vehicle pose at each scan's end stamp (within a cone
 about the scanner's optical axis and a range window) and reports noisy :class:`~semslam.detection.Detection`
 objects with their covariance, optional misses, misclassifications and false detections, as
-``{scan_id: [Detection, ...]}``, the form :func:`semslam.slam.run_slam` takes.
+``{scan_id: [Detection, ...]}``, the form :func:`semslam.run.run_slam` takes.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .._validation import as_rng, check_positive
-from ..dataset import Dataset as Mission
+from ..dataset import Dataset
 from ..detection import Detection
 from ..errors import InputError, SlamError
 from ..geometry import RigidTransform, rotation_from_rpy, rotations_from_rpy, rpy_from_rotation
@@ -32,7 +32,7 @@ class TruthDetectionConfig:
     the probability that a true detection carries another class's label. Without scans in the mission,
     virtual scans are made at ``scan_rate_hz``.
 
-    The default noise matches the pose estimator (:mod:`semslam.registration.pose`) on the simulator's laser
+    The default noise matches the pose estimator (:mod:`semslam.pose.estimate`) on the simulator's laser
     scans: median errors ~2 mm and ~2.5 degrees, with a calibrated covariance floored at 1 mm / 0.04 rad.
     ``position_sigma_m = 3 mm`` per axis (median error 4.6 mm) and ``rotation_sigma_rad = 2 deg`` (median
     3.1 deg) stay on the conservative side of those figures (the former 30 mm was ten times the estimator's
@@ -63,7 +63,7 @@ class TruthDetectionConfig:
         return {k: float(v) for k, v in asdict(self).items()}
 
 
-def scan_stamps(mission: Mission, scan_rate_hz: float) -> list[tuple[int, float]]:
+def scan_stamps(mission: Dataset, scan_rate_hz: float) -> list[tuple[int, float]]:
     """``(scan_id, end_stamp_s)`` of the mission's scans, or virtual scans at ``scan_rate_hz``."""
     if mission.scans:
         return [(s.scan_id, float(s.end_stamp_s)) for s in mission.scans]
@@ -74,7 +74,7 @@ def scan_stamps(mission: Mission, scan_rate_hz: float) -> list[tuple[int, float]
     return [(i, float(s)) for i, s in enumerate(stamps)]
 
 
-def truth_pose_at(mission: Mission, stamp_s: float) -> RigidTransform:
+def truth_pose_at(mission: Dataset, stamp_s: float) -> RigidTransform:
     """True ``T_world_vehicle`` at ``stamp_s`` (linear interpolation, yaw unwrapped)."""
     tr = mission.truth
     rpy = np.unwrap(tr.rpy_rad, axis=0)
@@ -82,7 +82,7 @@ def truth_pose_at(mission: Mission, stamp_s: float) -> RigidTransform:
     return RigidTransform.from_xyz_rpy(tr.interpolate_position(stamp_s)[0], a)
 
 
-def simulate_detections(mission: Mission, config: TruthDetectionConfig | None = None, *, seed=0,
+def simulate_detections(mission: Dataset, config: TruthDetectionConfig | None = None, *, seed=0,
                         symmetries: dict[str, Symmetry] | None = None) -> dict[int, list[Detection]]:
     """Truth-based detections ``{scan_id: [Detection]}`` (see module docstring). Seeded."""
     config = config or TruthDetectionConfig()
@@ -92,7 +92,7 @@ def simulate_detections(mission: Mission, config: TruthDetectionConfig | None = 
     symmetries = symmetries or {}
     objects = [o for o in mission.objects if o.in_database]
     labels = sorted({o.label for o in objects} | set(symmetries))
-    T_vs = mission.T_vehicle_scanner.matrix
+    T_vs = mission.vehicle.scanner.T_vehicle_scanner.matrix
     out: dict[int, list[Detection]] = {}
     half = config.fov_rad / 2.0
     scans = scan_stamps(mission, config.scan_rate_hz)
@@ -137,7 +137,7 @@ def simulate_detections(mission: Mission, config: TruthDetectionConfig | None = 
     return out
 
 
-def _truth_poses(mission: Mission, stamps: np.ndarray) -> np.ndarray:
+def _truth_poses(mission: Dataset, stamps: np.ndarray) -> np.ndarray:
     """True ``T_world_vehicle`` (K, 4, 4) at ``stamps`` (linear interpolation, angles unwrapped)."""
     tr = mission.truth
     rpy = np.unwrap(tr.rpy_rad, axis=0)

@@ -13,20 +13,20 @@ import numpy as np
 
 from ..cloud import PointCloud
 from ..detection import Detection
-from ..errors import MissionError
+from ..errors import DatasetError
 from ..geometry import RigidTransform
 from ..symmetry import Symmetry
-from ..dataset import Mission, ScanRecord
+from ..dataset import Dataset, ScanRecord
 from .simulate import T_world_scanner_at
 
 BACKGROUND = "background"
 
 
-def true_T_scanner_object(mission: Mission, object_index: int, stamp_s: float) -> RigidTransform:
+def true_T_scanner_object(mission: Dataset, object_index: int, stamp_s: float) -> RigidTransform:
     """The true pose of ``mission.objects[object_index]`` in the scanner frame at ``stamp_s``."""
     if mission.truth is None:
-        raise MissionError("the mission has no ground truth")
-    T_world_scanner = T_world_scanner_at(mission.truth, mission.T_vehicle_scanner, stamp_s)
+        raise DatasetError("the mission has no ground truth")
+    T_world_scanner = T_world_scanner_at(mission.truth, mission.vehicle.scanner.T_vehicle_scanner, stamp_s)
     return T_world_scanner.inverse() @ mission.objects[object_index].T_world_object
 
 
@@ -40,10 +40,10 @@ class ClusterTruth:
     purity: float
 
 
-def cluster_truth(mission: Mission, cloud: PointCloud, point_indices: np.ndarray) -> ClusterTruth:
+def cluster_truth(mission: Dataset, cloud: PointCloud, point_indices: np.ndarray) -> ClusterTruth:
     """Majority ground-truth object of the scan points ``point_indices``."""
     if "instance" not in cloud.fields:
-        raise MissionError("the scan has no 'instance' field: it was not simulated by semslam")
+        raise DatasetError("the scan has no 'instance' field: it was not simulated by semslam")
     inst = np.asarray(cloud.fields["instance"])[np.asarray(point_indices, dtype=np.int64)]
     if inst.size == 0:
         return ClusterTruth(-1, BACKGROUND, 0.0)

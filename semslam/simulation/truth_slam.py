@@ -92,6 +92,6 @@ def run_truth_slam(mission: Dataset, *, mode: str = "pose", config: SlamConfig |
 
     out = run_stream(open_dive(mission, scans=False), modes=(mode,), detections_by_scan=dets, config=config,
                      symmetries=symmetries, backend=backend, survey=survey)
-    from ..slam.evaluation import evaluate_run
+    from ..evaluation.slam_run import evaluate_run
 
     return evaluate_run(out.results[mode], mission, symmetries)  # after the run

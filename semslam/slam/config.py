@@ -74,7 +74,7 @@ class MotionConfig:
     velocity_rw_mps_per_sqrt_s: float | tuple = (0.02, 0.01, 0.01)
     #: the same while the DVL is out (no accepted DVL sample for ``unaided_after_s``): nothing then catches a
     #: manoeuvre, so the noise must cover the vehicle's real velocity changes. Measured, not assumed: the default
-    #: is :func:`semslam.slam.motion_noise.measure_unaided_motion` on the simulator's missions' DVL logs
+    #: is :func:`semslam.evaluation.motion_noise.measure_unaided_motion` on the simulator's missions' DVL logs
     #: (``benchmarks/dvl_outage.py --measure``); measure your vehicle's from one of its DVL logs
     unaided_velocity_rw_mps_per_sqrt_s: float | tuple = (0.054, 0.021, 0.026)
     unaided_after_s: float = 1.0

@@ -13,7 +13,7 @@ from .config import SlamConfig
 @dataclass(frozen=True, eq=False)
 class LandmarkEstimate:
     """A mapped landmark (pose in the world frame, covariance x y z roll pitch yaw). The error fields are
-    filled by :func:`semslam.slam.evaluation.evaluate_run` when ground truth exists (NaN otherwise)."""
+    filled by :func:`semslam.evaluation.slam_run.evaluate_run` when ground truth exists (NaN otherwise)."""
 
     landmark_id: int
     label: str

@@ -42,7 +42,7 @@ from ..symmetry import Symmetry
 from .config import MODES, SlamConfig
 from .ekf import SemanticEkf
 from .mapping import ObjectMapper
-from .metrics import nis_summary
+from .consistency import nis_summary
 from .results import LandmarkEstimate, SlamEstimate, SlamResult
 from .sensors import AttitudeInput, DepthModel, DvlModel, PositionFixModel, SensorGate
 from .smoother import RtsRecorder
@@ -453,7 +453,7 @@ class SlamSession:
     def finish(self) -> SlamResult:
         """Process what is pending (holding the last attitude), record the remaining epochs up to the last
         navigation stamp, smooth, and return the run's :class:`SlamResult` (no ground truth: see
-        :func:`semslam.slam.evaluation.evaluate_run`)."""
+        :func:`semslam.evaluation.slam_run.evaluate_run`)."""
         if self.ekf is None or not len(self.attitude):
             raise SlamError("The session has no attitude sample: the filter needs the attitude as input.")
         if self._finished:

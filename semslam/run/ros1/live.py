@@ -460,7 +460,7 @@ def live_health(live: LiveSlam):
     """The health verdict (:func:`semslam.run.health.health_verdict`) of the published mode's session as it is now:
     its update log tallied incrementally (gates, NIS, landmark updates), its landmarks and covariance, the runner's
     counts and the reorder window's drops. Call with ``live.lock`` held; None before the start."""
-    from ...slam.metrics import chi2_band
+    from ...slam.consistency import chi2_band
     from ..health import health_verdict
 
     s = live.session

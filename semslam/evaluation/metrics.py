@@ -5,20 +5,13 @@
 * NEES ``e^T P^-1 e`` of the vehicle position (3 dof) per epoch; for one run, the per-epoch 95 % interval
   ``[chi2_0.025(3), chi2_0.975(3)]``; over N Monte-Carlo runs, ANEES against
   ``[chi2_0.025(3N)/N, chi2_0.975(3N)/N]`` (Bar-Shalom, Li, Kirubarajan 2001).
-* NIS per update type: mean against ``[chi2_0.025(m K)/K, chi2_0.975(m K)/K]``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-
-def chi2_band(dof: int, n: int, probability: float = 0.95) -> tuple[float, float]:
-    """Two-sided band of the mean of ``n`` independent chi-square(dof) variables."""
-    a = (1.0 - probability) / 2.0
-    from scipy.stats import chi2  # lazily: scipy.stats costs ~1 s to import
-
-    return float(chi2.ppf(a, dof * n) / n), float(chi2.ppf(1.0 - a, dof * n) / n)
+from ..slam.consistency import chi2_band
 
 
 def nees(errors: np.ndarray, covs: np.ndarray) -> np.ndarray:
@@ -48,17 +41,6 @@ def trajectory_metrics(est_m: np.ndarray, truth_m: np.ndarray, covs: np.ndarray)
         "nees_position_fraction_in_95": float(np.mean((e >= lo) & (e <= hi))),
         "fraction_within_3sigma": float(np.mean(np.abs(err) <= 3.0 * np.sqrt(np.diagonal(covs, axis1=1, axis2=2)))),
     }
-
-
-def nis_summary(nis_by_type: dict[str, tuple[list[float], int]]) -> dict:
-    """Mean NIS per update type with its chi-square band: ``{type: (values, dof)}``."""
-    out = {}
-    for kind, (values, dof) in nis_by_type.items():
-        v = np.asarray(values, dtype=float)
-        if len(v) == 0:
-            continue
-        out[kind] = {"n": int(len(v)), "dof": int(dof), "mean": float(v.mean()), "band": list(chi2_band(dof, len(v)))}
-    return out
 
 
 def anees(nees_runs: np.ndarray, dof: int = 3) -> dict:

@@ -15,12 +15,12 @@ from ..dataset import Dataset
 from ..detection import Detection
 from ..errors import SlamError
 from ..symmetry import Symmetry
-from .config import MODES, SlamConfig
-from .evaluation import evaluate_run
-from .initial import InitialState, initial_state_of
-from .results import SlamResult
-from .session import SlamSession
-from .survey import Survey
+from ..slam.config import MODES, SlamConfig
+from ..evaluation.slam_run import evaluate_run
+from ..slam.initial import InitialState, initial_state_of
+from ..slam.results import SlamResult
+from ..slam.session import SlamSession
+from ..slam.survey import Survey
 
 #: the estimators behind a run (see :func:`run_slam`)
 BACKENDS = ("ekf", "isam2", "batch")
@@ -130,7 +130,7 @@ def make_session(vehicle, start: InitialState, *, mode: str, config: SlamConfig,
     kw = dict(mode=mode, config=config, symmetries=symmetries, start=start)
     if backend == "ekf":
         return SlamSession(vehicle, **kw)
-    from .graph import GraphSession  # lazily: GTSAM is imported only for the graph backends
+    from ..slam.graph import GraphSession  # lazily: GTSAM is imported only for the graph backends
 
     return GraphSession(vehicle, backend=backend, huber_k=huber_k, **kw)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write_text
-from .results import SlamResult
+from ..slam.results import SlamResult
 
 TRAJECTORY = "trajectory.csv"
 TRAJECTORY_SMOOTHED = "trajectory_smoothed.csv"

@@ -6,7 +6,7 @@
   KITTI keeps stamps apart, a times file beside it (one stamp in seconds a line).
 * ``write_landmarks_json`` / ``write_landmarks_csv`` / ``write_landmarks_ply``: the map with its full 6x6
   covariances (x y z roll pitch yaw, world NED), ids, labels, first/last seen and update counts.
-* ``write_mcap`` (:mod:`semslam.slam.export_mcap`): a ROS 2 bag for Foxglove / RViz, in ROS frames (REP-103/105).
+* ``write_mcap`` (:mod:`semslam.run.export_mcap`): a ROS 2 bag for Foxglove / RViz, in ROS frames (REP-103/105).
 * ``export_run``: all of them with conventional names.
 
 Poses are ``T_world_vehicle``. ``frame="ned"`` (default) keeps semslam's frames (world NED, body FRD: x forward,
@@ -28,64 +28,17 @@ import numpy as np
 
 from .._atomic import atomic_open, atomic_write_text
 from .._jsonable import to_jsonable
-from ..errors import InputError, SlamError
+from ..errors import InputError
 from ..geometry import quat_wxyz_from_rotation, rotations_from_rpy
-from ..io.ros.frames import R_world_enu_vehicle_flu_from_R_world_ned_vehicle_frd, vectors_enu_from_ned
-from .results import SlamResult
+from ..slam.results import SlamResult
+from .result_views import check_file_path, check_frame, check_result, landmark_class_indices, trajectory_poses
 
 __all__ = ["FORMATS", "export_run", "kitti_times_path", "landmark_class_indices", "trajectory_poses",
            "write_kitti", "write_landmarks_csv", "write_landmarks_json", "write_landmarks_ply", "write_tum"]
 
 #: format names of :func:`export_run`
 FORMATS = ("tum", "kitti", "landmarks", "mcap")
-FRAMES = ("ned", "enu")
 _AXES = ("x", "y", "z", "roll", "pitch", "yaw")
-
-
-def _check_result(result: Any, caller: str, *, need_attitude: bool) -> SlamResult:
-    if not isinstance(result, SlamResult):
-        raise InputError(f"The 'result' argument of {caller} must be a semslam.slam.SlamResult. "
-                         f"Got {type(result).__name__} instead.")
-    if need_attitude:
-        att = result.attitude_rpy_rad
-        if att is None or np.shape(att) != (len(result.stamps_s), 3):
-            raise SlamError(f"The 'result' argument of {caller} must have an attitude (attitude_rpy_rad, (K, 3)): "
-                            f"this format stores orientations. Got {'none' if att is None else np.shape(att)} "
-                            f"instead (a result from an older semslam: run the SLAM again).")
-    return result
-
-
-def _check_file_path(path: Any, caller: str, name: str = "path") -> Path:
-    try:
-        out = Path(path)
-    except TypeError:
-        raise InputError(f"The {name!r} argument of {caller} must be a file path. Got {path!r:.60} instead.") from None
-    if out.is_dir():
-        raise InputError(f"The {name!r} argument of {caller} must be a file path. Got the directory '{out}' instead.")
-    return out
-
-
-def _check_frame(frame: Any, caller: str) -> str:
-    if frame not in FRAMES:
-        raise InputError(f"The 'frame' argument of {caller} must be one of {FRAMES}. Got {frame!r} instead.")
-    return frame
-
-
-def trajectory_poses(result: SlamResult, *, smoothed: bool = False, frame: str = "ned",
-                     caller: str = "trajectory_poses") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(stamps_s (K,), positions (K, 3), rotations (K, 3, 3))`` of ``T_world_vehicle`` in ``frame``:
-    ``"ned"`` (world NED, body FRD) or ``"enu"`` (world ENU, body FLU: ``R_enu_flu = C_NED_ENU R C_FRD_FLU``)."""
-    _check_result(result, caller, need_attitude=True)
-    _check_frame(frame, caller)
-    if smoothed and result.smoothed_position_ned_m is None:
-        raise SlamError(f"The 'smoothed' argument of {caller} asks for the smoothed trajectory, and the result has "
-                        f"none. Got smoothed=True instead (pass smoothed=False, or run the smoother).")
-    pos = np.asarray(result.smoothed_position_ned_m if smoothed else result.position_ned_m, dtype=np.float64)
-    R = rotations_from_rpy(np.asarray(result.attitude_rpy_rad, dtype=np.float64))
-    if frame == "enu":
-        pos = vectors_enu_from_ned(pos).reshape(-1, 3)
-        R = np.array([R_world_enu_vehicle_flu_from_R_world_ned_vehicle_frd(r) for r in R]).reshape(-1, 3, 3)
-    return np.asarray(result.stamps_s, dtype=np.float64), pos, R
 
 
 def write_tum(result: SlamResult, path: str | os.PathLike, *, smoothed: bool = False, frame: str = "ned") -> Path:
@@ -95,7 +48,7 @@ def write_tum(result: SlamResult, path: str | os.PathLike, *, smoothed: bool = F
     ``smoothed``: the RTS-smoothed positions instead of the online filter's. ``frame``: ``"ned"`` or ``"enu"``
     (module doc). TUM has no covariance. Raises :class:`SlamError` when the result has no attitude.
     """
-    out = _check_file_path(path, "write_tum")
+    out = check_file_path(path, "write_tum")
     stamps, pos, R = trajectory_poses(result, smoothed=smoothed, frame=frame, caller="write_tum")
     body = "FLU" if frame == "enu" else "FRD"
     lines = [f"# semslam {'smoothed' if smoothed else 'online'} trajectory ({result.mode}), T_world_vehicle: "
@@ -120,8 +73,8 @@ def write_kitti(result: SlamResult, path: str | os.PathLike, *, smoothed: bool =
 
     Returns ``(poses_path, times_path)``. ``smoothed``, ``frame``: as :func:`write_tum`. No covariance.
     """
-    out = _check_file_path(path, "write_kitti")
-    times = _check_file_path(kitti_times_path(out) if times_path is None else times_path, "write_kitti",
+    out = check_file_path(path, "write_kitti")
+    times = check_file_path(kitti_times_path(out) if times_path is None else times_path, "write_kitti",
                              "times_path")
     if times.resolve() == out.resolve():
         raise InputError(f"The 'times_path' argument of write_kitti must differ from 'path'. Got '{times}' instead.")
@@ -130,11 +83,6 @@ def write_kitti(result: SlamResult, path: str | os.PathLike, *, smoothed: bool =
     atomic_write_text(out, "".join(" ".join(f"{v:.12e}" for v in row) + "\n" for row in rows))
     atomic_write_text(times, "".join(f"{t:.9f}\n" for t in stamps))
     return out, times
-
-
-def landmark_class_indices(result: SlamResult) -> dict[str, int]:
-    """Class index of each label of the map: the sorted labels numbered from 0 (the PLY's ``class_index``)."""
-    return {label: i for i, label in enumerate(sorted({lm.label for lm in result.landmarks}))}
 
 
 def _landmark_record(lm: Any) -> dict:
@@ -159,8 +107,8 @@ def write_landmarks_json(result: SlamResult, path: str | os.PathLike) -> Path:
     covariance (landmarks mapped from one trajectory share its errors: a map reused without their correlation
     would bend the next dive's trajectory). Errors against ground truth are not part of the map (the run's
     ``landmarks.csv`` has them)."""
-    out = _check_file_path(path, "write_landmarks_json")
-    _check_result(result, "write_landmarks_json", need_attitude=False)
+    out = check_file_path(path, "write_landmarks_json")
+    check_result(result, "write_landmarks_json", need_attitude=False)
     start = result.metrics.get("start") or {}
     doc = {"format": "semslam-map", "format_version": 2,
            "frame": "world NED (x north, y east, z down); roll pitch yaw intrinsic Z-Y-X",
@@ -179,8 +127,8 @@ def write_landmarks_csv(result: SlamResult, path: str | os.PathLike) -> Path:
     seen, updates and the full 6x6 covariance row-major as 36 columns
     ``cov_<a>_<b>`` with a, b in x y z roll pitch yaw (unlike the run directory's ``landmarks.csv``, which keeps
     the upper triangle)."""
-    out = _check_file_path(path, "write_landmarks_csv")
-    _check_result(result, "write_landmarks_csv", need_attitude=False)
+    out = check_file_path(path, "write_landmarks_csv")
+    check_result(result, "write_landmarks_csv", need_attitude=False)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["landmark_id", "label", "name", "x_m", "y_m", "z_m", "roll_rad", "pitch_rad",
@@ -204,8 +152,8 @@ def write_landmarks_ply(result: SlamResult, path: str | os.PathLike) -> Path:
     :func:`semslam.io.read_point_cloud` reads it back (the ints in ``fields``)."""
     import plyfile
 
-    out = _check_file_path(path, "write_landmarks_ply")
-    _check_result(result, "write_landmarks_ply", need_attitude=False)
+    out = check_file_path(path, "write_landmarks_ply")
+    check_result(result, "write_landmarks_ply", need_attitude=False)
     classes = landmark_class_indices(result)
     vertex = np.zeros(len(result.landmarks), dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"),
                                                    ("class_index", "<i4"), ("landmark_id", "<i4"),
@@ -229,7 +177,7 @@ def export_run(result: SlamResult, out_dir: str | os.PathLike, *, formats: Itera
     * ``"tum"``: ``trajectory.tum`` (and ``trajectory_smoothed.tum`` when the result is smoothed and ``smoothed``);
     * ``"kitti"``: ``trajectory.kitti`` + ``trajectory.times.txt`` (and the ``trajectory_smoothed.*`` pair);
     * ``"landmarks"``: ``map.json``, ``map.csv``, ``map.ply`` (``landmarks.csv`` is the run directory's own);
-    * ``"mcap"``: ``run.mcap``, one self-contained mcap file (:func:`semslam.slam.export_mcap.write_mcap`, which
+    * ``"mcap"``: ``run.mcap``, one self-contained mcap file (:func:`semslam.run.export_mcap.write_mcap`, which
       gets ``mcap_options``; ``/semslam/path_smoothed`` follows ``smoothed``).
 
     ``frame`` applies to TUM and KITTI (the mcap is always in ROS frames, the map files in NED). The formats, the
@@ -243,8 +191,8 @@ def export_run(result: SlamResult, out_dir: str | os.PathLike, *, formats: Itera
     if bad or not formats:
         raise InputError(f"The 'formats' argument of export_run must name one or more of {FORMATS}. "
                          f"Got {bad[0] if bad else formats!r} instead.")
-    _check_frame(frame, "export_run")
-    _check_result(result, "export_run", need_attitude=any(f != "landmarks" for f in formats))
+    check_frame(frame, "export_run")
+    check_result(result, "export_run", need_attitude=any(f != "landmarks" for f in formats))
     if mcap_options:
         import inspect
 

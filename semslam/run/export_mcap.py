@@ -43,8 +43,8 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import RigidTransform, quat_wxyz_from_rotation, rotation_from_quat_wxyz
 from ..io.ros.frames import C_NED_ENU, quat_xyzw_from_R_world_ned_vehicle_frd, vectors_enu_from_ned
-from .export import _check_result, landmark_class_indices, trajectory_poses
-from .results import SlamResult
+from .result_views import check_result, landmark_class_indices, trajectory_poses
+from ..slam.results import SlamResult
 
 __all__ = ["write_mcap", "TOPICS"]
 
@@ -104,7 +104,7 @@ def write_mcap(result: SlamResult, path: str | os.PathLike, *, frame_id: str = "
 
     from ..io.ros._encode import default_typestore, ros_header
 
-    _check_result(result, "write_mcap", need_attitude=True)
+    check_result(result, "write_mcap", need_attitude=True)
     out, single = _check_target(path)
     if (detections_by_scan is None) != (T_vehicle_scanner is None):
         raise InputError("The 'T_vehicle_scanner' argument of write_mcap must be given with 'detections_by_scan' "

@@ -286,7 +286,7 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
     alignment is doubtful (under 30 % of their points within three
     point spacings of the other views). Keyword arguments go to :func:`~semslam.recognition.build_database`.
     """
-    from ..recognition.build import build_database, folder_classes, read_view_folder
+    from .build import build_database, folder_classes, read_view_folder
 
     views, declared, meta_path = read_view_folder(views_dir, clean=clean)
     root = Path(views_dir)
@@ -302,7 +302,7 @@ def build_fused_database(views_dir: str | Path, *, up_sensor: Any = None, clean:
         fused += [(label, vid, c) for vid, c in out]
         reports[label] = {"poses": rep.poses, "doubtful": rep.doubtful, "up_object": rep.up_object,
                           "median_rms_m": float(np.nanmedian(list(rep.rms_m.values()))) if rep.rms_m else None}
-    from ..recognition.preprocessing import ViewPreprocessing  # the cleaning is recorded, applied to queries
+    from .preprocessing import ViewPreprocessing  # the cleaning is recorded, applied to queries
 
     db = build_database(fused, folder_classes(fused, declared, meta_path), seed=seed, progress=progress,
                         preprocessing=ViewPreprocessing(clean=bool(clean)), views_preprocessed=True, **kwargs)

@@ -26,14 +26,14 @@ from ..cloud import PointCloud
 from ..errors import InputError, RegistrationError
 from ..geometry import RigidTransform, orthonormalize_transform
 from ..symmetry import Symmetry
-from .coarse import align_prerejective
+from ..registration.coarse import align_prerejective
 from .covariance import calibration_of, pose_covariance, widen_untrusted
-from ._icp_kernels import icp_plane_field, icp_plane_field_batch
-from .icp import ICP_METHODS, align_icp
-from .pose_model import PoseConfig, PoseModel, _nearest, prepare_pose_model
-from .ambiguity import half_turns
-from .result import RegistrationResult, _inlier_statistics_of_distances
-from .upright import upright_rotations
+from ..registration._icp_kernels import icp_plane_field, icp_plane_field_batch
+from ..registration.icp import ICP_METHODS, align_icp
+from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
+from ..registration.ambiguity import half_turns
+from ..registration.result import RegistrationResult, _inlier_statistics_of_distances
+from ..registration.upright import upright_rotations
 from .search import RangeImage, rotation_distances, search_hypotheses
 
 __all__ = ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "pose_verdict", "prepare_pose_model",
@@ -410,7 +410,8 @@ def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os:
 
 def _coarse_ransac(cluster, vp, model: PoseModel, cfg: PoseConfig, seed):
     """FPFH of the voxelised cluster and prerejective RANSAC onto the model (from the centroid guess)."""
-    from ..descriptors import compute_fpfh, estimate_normals
+    from ..descriptors.fpfh import compute_fpfh
+    from ..descriptors import estimate_normals
     from ..segmentation.voxel import voxel_downsample
 
     if model.coarse_features is None:

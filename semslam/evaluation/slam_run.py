@@ -20,10 +20,10 @@ from ..dataset import Dataset, ObjectTruth
 from ..geometry import RigidTransform
 from ..geometry import rotation_from_rpy
 from ..symmetry import Symmetry
-from . import _ekf_kernels as kern
-from .association import align_rotation
+from ..slam import _ekf_kernels as kern
+from ..slam.association import align_rotation
 from .metrics import trajectory_metrics
-from .results import LandmarkEstimate, SlamResult
+from ..slam.results import LandmarkEstimate, SlamResult
 
 
 def evaluate_landmark(lm: LandmarkEstimate, objects, symmetry: Symmetry) -> LandmarkEstimate:

@@ -12,9 +12,9 @@ import numpy as np
 from .._progress import progress_steps
 from .._validation import as_rng, check_choice, check_int
 from ..errors import RecognitionError
-from . import _chi2_kernels
-from .database import DESCRIPTORS, ViewDatabase
-from .matching import SvmClassifier
+from ..recognition import _chi2_kernels
+from ..recognition.database import DESCRIPTORS, ViewDatabase
+from ..recognition.matching import SvmClassifier
 
 CLASSIFIERS = ("chi2", "svm")
 

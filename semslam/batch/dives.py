@@ -68,8 +68,8 @@ def run_batch(dives: Sequence[str | Path], out: str | Path, process: Callable[[P
     """Process ``dives`` into ``out`` (see the module docstring) and write the tables; ``process(dive, out_dir,
     options)``: a module-level function writing one dive's run into ``out_dir`` (it runs on a worker: the dives,
     ``out`` and what ``options`` names must be on a file system every worker sees). Engine: ``client`` /
-    ``scheduler`` / ``jobs`` as :func:`semslam.experiments._dask.map_tasks`. ``on_dive(i, row)`` as each dive ends."""
-    from ._dask import TaskFailed, map_tasks
+    ``scheduler`` / ``jobs`` as :func:`semslam.batch.engine.map_tasks`. ``on_dive(i, row)`` as each dive ends."""
+    from .engine import TaskFailed, map_tasks
 
     if isinstance(dives, (str, Path)) or not len(dives):
         raise InputError(f"The 'DIVES' argument of semslam batch must name at least one bag or mission directory. "
@@ -130,7 +130,7 @@ def _failed_row(item: dict, error: str, wall_s: float) -> dict:
 
 def row_from_run_dir(run: Path, source: str) -> dict:
     """The summary row of a complete run directory (``semslam run``'s layout), from its files only."""
-    from ..slam.rundir import DETECTIONS, METRICS, MODES_DIR
+    from ..run.rundir import DETECTIONS, METRICS, MODES_DIR
 
     modes = {}
     mode_root = run / MODES_DIR

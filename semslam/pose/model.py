@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from .._validation import as_float_array, check_choice, check_int, check_positive
 from ..cloud import PointCloud
 from ..errors import InputError, RegistrationError
-from .icp import ICP_METHODS, IcpTarget, prepare_icp_target
+from ..registration.icp import ICP_METHODS, IcpTarget, prepare_icp_target
 from .search import DistanceField, RadiusGrid, RotationHierarchy, ViewCentroids, so3_grid
 
 
@@ -108,7 +108,7 @@ class PoseConfig:
     #: Voxel leaf of the model used by ICP (0 = every model point).
     model_icp_voxel_m: float = 0.0015
     #: Multiplies the Gauss-Newton covariance, itself counted over the effectively independent residuals
-    #: (:class:`~semslam.registration.covariance.CovarianceCalibration`, issue 29: ``benchmarks/real_models.py``).
+    #: (:class:`~semslam.pose.covariance.CovarianceCalibration`, issue 29: ``benchmarks/real_models.py``).
     covariance_inflation: float = 1.0
     #: Floors added to the variances (per axis, in the object frame): no direction is more certain than this
     #: (the scans are distorted by the vehicle's motion within a scan; the database views are noisy).
@@ -240,7 +240,7 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
     down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m)
     feats = ftree = None
     if cfg.coarse_method == "ransac":
-        from ..descriptors import compute_fpfh
+        from ..descriptors.fpfh import compute_fpfh
 
         feats = compute_fpfh(down, nrm, radius_m=cfg.feature_radius_m)
         ftree = cKDTree(feats)
