@@ -14,70 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._laser_plane_kernels import first_large_hit, large_faces_cut, line_plane, mark_small_disk_rays
 from ._ray_kernels import inside_large
-
-#: Angular margin (rad) of the per-line windows of large faces (covers rounding only).
-_WINDOW_TOL_RAD = 1e-5
-#: A vertex closer than this (m) to a laser plane counts as on it.
-_PLANE_TOL_M = 1e-9
-
-
-@njit(cache=True, error_model="numpy")
-def _wrap(x):
-    if x > np.pi:
-        return x - 2.0 * np.pi
-    if x < -np.pi:
-        return x + 2.0 * np.pi
-    return x
-
-
-@njit(cache=True, error_model="numpy")
-def _face_window(f, lverts, ox, oy, oz, px, py, pz, sx, sy, sz, yx, yy, yz):
-    """In-plane angular window (centre, half width) where the laser plane (origin o, normal p, axes s
-    and y) cuts large face f; half < 0 when it does not cut it, half > pi when every ray must test it."""
-    h = np.empty(3)
-    for e in range(3):
-        h[e] = (lverts[f, e, 0] - ox) * px + (lverts[f, e, 1] - oy) * py + (lverts[f, e, 2] - oz) * pz
-    if (h[0] > _PLANE_TOL_M and h[1] > _PLANE_TOL_M and h[2] > _PLANE_TOL_M) or \
-            (h[0] < -_PLANE_TOL_M and h[1] < -_PLANE_TOL_M and h[2] < -_PLANE_TOL_M):
-        return 0.0, -1.0
-    n_on = 0
-    ang0 = 0.0
-    lo = 0.0
-    hi = 0.0
-    n_pts = 0
-    for e in range(3):
-        b = (e + 1) % 3
-        ha, hb = h[e], h[b]
-        for case in range(2):
-            if case == 0:
-                if abs(ha) > _PLANE_TOL_M:
-                    continue
-                n_on += 1
-                wx, wy, wz = lverts[f, e, 0] - ox, lverts[f, e, 1] - oy, lverts[f, e, 2] - oz
-            else:
-                if not ((ha > _PLANE_TOL_M and hb < -_PLANE_TOL_M) or (ha < -_PLANE_TOL_M and hb > _PLANE_TOL_M)):
-                    continue
-                u = ha / (ha - hb)
-                wx = lverts[f, e, 0] + u * (lverts[f, b, 0] - lverts[f, e, 0]) - ox
-                wy = lverts[f, e, 1] + u * (lverts[f, b, 1] - lverts[f, e, 1]) - oy
-                wz = lverts[f, e, 2] + u * (lverts[f, b, 2] - lverts[f, e, 2]) - oz
-            cs = wx * sx + wy * sy + wz * sz
-            cy = wx * yx + wy * yy + wz * yz
-            if cs * cs + cy * cy < 1e-18:  # the line's origin is on the face
-                return 0.0, 10.0
-            ang = np.arctan2(cy, cs)
-            if n_pts == 0:
-                ang0 = ang
-            else:
-                rel = _wrap(ang - ang0)
-                lo = min(lo, rel)
-                hi = max(hi, rel)
-            n_pts += 1
-    if n_on == 3 or hi - lo > np.pi - 0.01:  # face in the plane, or seen across the origin
-        return 0.0, 10.0
-    return ang0 + 0.5 * (lo + hi), 0.5 * (hi - lo) + _WINDOW_TOL_RAD
-
 
 
 @njit(cache=True, error_model="numpy")
@@ -115,61 +53,13 @@ def laser_pass(dirs_local, R, t, m, sin_a, cos_a, phi, phi_tol, lid, lverts, lv0
     half = np.empty(n_large)
     for k in range(n_lines):
         ox, oy, oz = t[k, 0], t[k, 1], t[k, 2]
-        sx = R[k, 0, 0] * sin_a[k] + R[k, 0, 2] * cos_a[k]  # in-plane axis (phi = 0)
-        sy = R[k, 1, 0] * sin_a[k] + R[k, 1, 2] * cos_a[k]
-        sz = R[k, 2, 0] * sin_a[k] + R[k, 2, 2] * cos_a[k]
-        yx, yy, yz = R[k, 0, 1], R[k, 1, 1], R[k, 2, 1]  # in-plane axis (phi = pi / 2)
-        px = R[k, 0, 0] * cos_a[k] - R[k, 0, 2] * sin_a[k]  # plane normal
-        py = R[k, 1, 0] * cos_a[k] - R[k, 1, 2] * sin_a[k]
-        pz = R[k, 2, 0] * cos_a[k] - R[k, 2, 2] * sin_a[k]
-        # large faces the laser plane cuts, with the angular window of the cut
-        n_rel = 0
-        for f in range(n_large):
-            cw, hw = _face_window(f, lverts, ox, oy, oz, px, py, pz, sx, sy, sz, yx, yy, yz)
-            if hw < 0.0:
-                continue
-            faces[n_rel] = f
-            centre[n_rel] = cw
-            half[n_rel] = hw
-            num[n_rel] = (lv0[f, 0] - ox) * ln[f, 0] + (lv0[f, 1] - oy) * ln[f, 1] + (lv0[f, 2] - oz) * ln[f, 2]
-            n_rel += 1
-        # small-face spheres cut by the laser plane: disks; mark the rays that reach one
-        mark[:] = False
-        for g in range(sc.shape[0]):
-            vx, vy, vz = sc[g, 0] - ox, sc[g, 1] - oy, sc[g, 2] - oz
-            h = vx * px + vy * py + vz * pz
-            if abs(h) > sr[g]:
-                continue
-            rp2 = sr[g] * sr[g] - h * h
-            u = vx * sx + vy * sy + vz * sz
-            w = vx * yx + vy * yy + vz * yz
-            l2 = u * u + w * w
-            if l2 <= rp2:  # the line's origin is inside the disk
-                mark[:] = True
-                break
-            pc = np.arctan2(w, u)
-            hw = np.arcsin(min(1.0, np.sqrt(rp2 / l2))) + phi_tol
-            for j in range(m):
-                if abs(_wrap(phi[j] - pc)) <= hw:
-                    mark[j] = True
+        plane = line_plane(R, k, sin_a, cos_a)
+        n_rel = large_faces_cut(lverts, lv0, ln, ox, oy, oz, plane, faces, centre, half, num)
+        mark_small_disk_rays(mark, m, phi, phi_tol, sc, sr, ox, oy, oz, plane)
         for j in range(m):
             i = k * m + j
             dx, dy, dz = _direction(R, k, dirs_local, i)
-            best = np.inf
-            bf = -1
-            for r in range(n_rel):
-                if abs(_wrap(phi[j] - centre[r])) > half[r]:
-                    continue
-                f = faces[r]
-                den = dx * ln[f, 0] + dy * ln[f, 1] + dz * ln[f, 2]
-                if den == 0.0:
-                    continue
-                s = num[r] / den
-                if s <= 0.0 or s >= best:
-                    continue
-                if inside_large(f, ox + s * dx, oy + s * dy, oz + s * dz, len_, lec):
-                    best = s
-                    bf = f
+            best, bf = first_large_hit(phi[j], ox, oy, oz, dx, dy, dz, n_rel, faces, centre, half, num, ln, len_, lec)
             if bf >= 0:
                 tri[i] = lid[bf]
                 t_hit[i] = best
@@ -197,6 +87,110 @@ def merge_small_hits(tri, t_hit, cand, small_tri, dirs_local, R, t, m, v0, norma
         if den != 0.0 and num / den < t_hit[i]:
             tri[i] = f
             t_hit[i] = num / den
+
+
+@njit(cache=True, error_model="numpy")
+def _camera_centre(R, t, line, cam_local):
+    """World position of the camera during line ``line``."""
+    cx = t[line, 0] + R[line, 0, 0] * cam_local[0] + R[line, 0, 1] * cam_local[1] + R[line, 0, 2] * cam_local[2]
+    cy = t[line, 1] + R[line, 1, 0] * cam_local[0] + R[line, 1, 1] * cam_local[1] + R[line, 1, 2] * cam_local[2]
+    cz = t[line, 2] + R[line, 2, 0] * cam_local[0] + R[line, 2, 1] * cam_local[1] + R[line, 2, 2] * cam_local[2]
+    return cx, cy, cz
+
+
+@njit(cache=True, error_model="numpy")
+def _camera_view_hits(line, m, k, dirs_local, t_hit, R, cam_local, axis_local, cos_half_fov, min_range, max_range,
+                      end_gap, cx, cy, cz, idx, rcam, cd):
+    """Append the line's laser hits in range and in the camera's view to ``idx, rcam`` from entry ``k``
+    (their world unit camera directions to ``cd`` from row 0); returns the new ``k`` and the box (lo x, y,
+    z, hi x, y, z) of the camera centre c and the segment ends."""
+    k0 = k
+    lo_x, lo_y, lo_z, hi_x, hi_y, hi_z = cx, cy, cz, cx, cy, cz
+    for i in range(line * m, line * m + m):
+        s = t_hit[i]
+        if s < min_range or s > max_range:  # also no hit (inf)
+            continue
+        vx = dirs_local[i, 0] * s - cam_local[0]
+        vy = dirs_local[i, 1] * s - cam_local[1]
+        vz = dirs_local[i, 2] * s - cam_local[2]
+        r = np.sqrt(vx * vx + vy * vy + vz * vz)
+        if r < min_range or r > max_range or r == 0.0:
+            continue
+        if (vx * axis_local[0] + vy * axis_local[1] + vz * axis_local[2]) / r < cos_half_fov:
+            continue
+        idx[k] = i
+        rcam[k] = r
+        q = k - k0
+        for a in range(3):
+            cd[q, a] = (R[line, a, 0] * vx + R[line, a, 1] * vy + R[line, a, 2] * vz) / r
+        length = r - end_gap
+        ex, ey, ez = cx + length * cd[q, 0], cy + length * cd[q, 1], cz + length * cd[q, 2]
+        lo_x, lo_y, lo_z = min(lo_x, ex), min(lo_y, ey), min(lo_z, ez)
+        hi_x, hi_y, hi_z = max(hi_x, ex), max(hi_y, ey), max(hi_z, ez)
+        k += 1
+    return k, (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z)
+
+
+@njit(cache=True, error_model="numpy")
+def _large_faces_in_box(box, cx, cy, cz, lv0, ln, faces, s_cam):
+    """Large faces whose plane crosses ``box``, in the first n entries of ``faces``, with the signed
+    distance ``s_cam`` of the camera centre c from the face's plane; returns n."""
+    lo_x, lo_y, lo_z, hi_x, hi_y, hi_z = box
+    n_large = lv0.shape[0]
+    bx, by, bz = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y), 0.5 * (lo_z + hi_z)
+    ex, ey, ez = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y), 0.5 * (hi_z - lo_z)
+    n_rel = 0
+    for f in range(n_large):
+        sb = (bx - lv0[f, 0]) * ln[f, 0] + (by - lv0[f, 1]) * ln[f, 1] + (bz - lv0[f, 2]) * ln[f, 2]
+        if abs(sb) > ex * abs(ln[f, 0]) + ey * abs(ln[f, 1]) + ez * abs(ln[f, 2]):
+            continue
+        faces[n_rel] = f
+        s_cam[n_rel] = (cx - lv0[f, 0]) * ln[f, 0] + (cy - lv0[f, 1]) * ln[f, 1] + (cz - lv0[f, 2]) * ln[f, 2]
+        n_rel += 1
+    return n_rel
+
+
+@njit(cache=True, error_model="numpy")
+def _block_by_large_faces(k0, k, rcam, end_gap, cd, cx, cy, cz, n_rel, faces, s_cam, ln, len_, lec, blocked):
+    """``blocked[k0 + q]`` for the segments ``c + s cd[q]`` (0 < s < camera range - end_gap) that cross one of
+    the first ``n_rel`` large faces (:func:`_large_faces_in_box`)."""
+    for q in range(k - k0):
+        length = rcam[k0 + q] - end_gap
+        ux, uy, uz = cd[q, 0], cd[q, 1], cd[q, 2]
+        for r in range(n_rel):
+            f = faces[r]
+            un = ux * ln[f, 0] + uy * ln[f, 1] + uz * ln[f, 2]
+            s_end = s_cam[r] + length * un
+            if (s_cam[r] > 0.0 and s_end > 0.0) or (s_cam[r] < 0.0 and s_end < 0.0) or un == 0.0:
+                continue  # both ends on the same side of the plane
+            s = -s_cam[r] / un
+            if s <= 0.0 or s >= length:
+                continue
+            if inside_large(f, cx + s * ux, cy + s * uy, cz + s * uz, len_, lec):
+                blocked[k0 + q] = True
+                break
+
+
+@njit(cache=True, error_model="numpy")
+def _mark_small_sphere_segments(mark, k0, k, blocked, rcam, end_gap, cd, cx, cy, cz, box, sc, sr):
+    """Small-face spheres that touch ``box``: ``mark[q]`` for the open segments (not ``blocked``) that
+    pass through one (candidates for Embree)."""
+    lo_x, lo_y, lo_z, hi_x, hi_y, hi_z = box
+    mark[:] = False
+    for g in range(sc.shape[0]):
+        rg = sr[g]
+        if (sc[g, 0] + rg < lo_x or sc[g, 0] - rg > hi_x or sc[g, 1] + rg < lo_y or sc[g, 1] - rg > hi_y
+                or sc[g, 2] + rg < lo_z or sc[g, 2] - rg > hi_z):
+            continue
+        vx, vy, vz = sc[g, 0] - cx, sc[g, 1] - cy, sc[g, 2] - cz
+        for q in range(k - k0):
+            if blocked[k0 + q] or mark[q]:
+                continue
+            length = rcam[k0 + q] - end_gap
+            s = min(max(vx * cd[q, 0] + vy * cd[q, 1] + vz * cd[q, 2], 0.0), length)
+            wx, wy, wz = vx - s * cd[q, 0], vy - s * cd[q, 1], vz - s * cd[q, 2]
+            if wx * wx + wy * wy + wz * wz <= rg * rg:
+                mark[q] = True
 
 
 @njit(cache=True, error_model="numpy")
@@ -228,76 +222,14 @@ def camera_pass(dirs_local, t_hit, R, t, m, cam_local, axis_local, cos_half_fov,
     c = 0
     for line in range(n_lines):
         k0 = k
-        cx = t[line, 0] + R[line, 0, 0] * cam_local[0] + R[line, 0, 1] * cam_local[1] + R[line, 0, 2] * cam_local[2]
-        cy = t[line, 1] + R[line, 1, 0] * cam_local[0] + R[line, 1, 1] * cam_local[1] + R[line, 1, 2] * cam_local[2]
-        cz = t[line, 2] + R[line, 2, 0] * cam_local[0] + R[line, 2, 1] * cam_local[1] + R[line, 2, 2] * cam_local[2]
-        lo_x, lo_y, lo_z, hi_x, hi_y, hi_z = cx, cy, cz, cx, cy, cz
-        for i in range(line * m, line * m + m):
-            s = t_hit[i]
-            if s < min_range or s > max_range:  # also no hit (inf)
-                continue
-            vx = dirs_local[i, 0] * s - cam_local[0]
-            vy = dirs_local[i, 1] * s - cam_local[1]
-            vz = dirs_local[i, 2] * s - cam_local[2]
-            r = np.sqrt(vx * vx + vy * vy + vz * vz)
-            if r < min_range or r > max_range or r == 0.0:
-                continue
-            if (vx * axis_local[0] + vy * axis_local[1] + vz * axis_local[2]) / r < cos_half_fov:
-                continue
-            idx[k] = i
-            rcam[k] = r
-            q = k - k0
-            for a in range(3):
-                cd[q, a] = (R[line, a, 0] * vx + R[line, a, 1] * vy + R[line, a, 2] * vz) / r
-            length = r - end_gap
-            ex, ey, ez = cx + length * cd[q, 0], cy + length * cd[q, 1], cz + length * cd[q, 2]
-            lo_x, lo_y, lo_z = min(lo_x, ex), min(lo_y, ey), min(lo_z, ez)
-            hi_x, hi_y, hi_z = max(hi_x, ex), max(hi_y, ey), max(hi_z, ez)
-            k += 1
+        cx, cy, cz = _camera_centre(R, t, line, cam_local)
+        k, box = _camera_view_hits(line, m, k, dirs_local, t_hit, R, cam_local, axis_local, cos_half_fov, min_range,
+                                   max_range, end_gap, cx, cy, cz, idx, rcam, cd)
         if k == k0:
             continue
-        # large faces whose plane crosses the box of the line's segments
-        bx, by, bz = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y), 0.5 * (lo_z + hi_z)
-        ex, ey, ez = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y), 0.5 * (hi_z - lo_z)
-        n_rel = 0
-        for f in range(n_large):
-            sb = (bx - lv0[f, 0]) * ln[f, 0] + (by - lv0[f, 1]) * ln[f, 1] + (bz - lv0[f, 2]) * ln[f, 2]
-            if abs(sb) > ex * abs(ln[f, 0]) + ey * abs(ln[f, 1]) + ez * abs(ln[f, 2]):
-                continue
-            faces[n_rel] = f
-            s_cam[n_rel] = (cx - lv0[f, 0]) * ln[f, 0] + (cy - lv0[f, 1]) * ln[f, 1] + (cz - lv0[f, 2]) * ln[f, 2]
-            n_rel += 1
-        for q in range(k - k0):
-            length = rcam[k0 + q] - end_gap
-            ux, uy, uz = cd[q, 0], cd[q, 1], cd[q, 2]
-            for r in range(n_rel):
-                f = faces[r]
-                un = ux * ln[f, 0] + uy * ln[f, 1] + uz * ln[f, 2]
-                s_end = s_cam[r] + length * un
-                if (s_cam[r] > 0.0 and s_end > 0.0) or (s_cam[r] < 0.0 and s_end < 0.0) or un == 0.0:
-                    continue  # both ends on the same side of the plane
-                s = -s_cam[r] / un
-                if s <= 0.0 or s >= length:
-                    continue
-                if inside_large(f, cx + s * ux, cy + s * uy, cz + s * uz, len_, lec):
-                    blocked[k0 + q] = True
-                    break
-        # small-face spheres that touch the box: candidates among the open segments
-        mark[:] = False
-        for g in range(sc.shape[0]):
-            rg = sr[g]
-            if (sc[g, 0] + rg < lo_x or sc[g, 0] - rg > hi_x or sc[g, 1] + rg < lo_y or sc[g, 1] - rg > hi_y
-                    or sc[g, 2] + rg < lo_z or sc[g, 2] - rg > hi_z):
-                continue
-            vx, vy, vz = sc[g, 0] - cx, sc[g, 1] - cy, sc[g, 2] - cz
-            for q in range(k - k0):
-                if blocked[k0 + q] or mark[q]:
-                    continue
-                length = rcam[k0 + q] - end_gap
-                s = min(max(vx * cd[q, 0] + vy * cd[q, 1] + vz * cd[q, 2], 0.0), length)
-                wx, wy, wz = vx - s * cd[q, 0], vy - s * cd[q, 1], vz - s * cd[q, 2]
-                if wx * wx + wy * wy + wz * wz <= rg * rg:
-                    mark[q] = True
+        n_rel = _large_faces_in_box(box, cx, cy, cz, lv0, ln, faces, s_cam)
+        _block_by_large_faces(k0, k, rcam, end_gap, cd, cx, cy, cz, n_rel, faces, s_cam, ln, len_, lec, blocked)
+        _mark_small_sphere_segments(mark, k0, k, blocked, rcam, end_gap, cd, cx, cy, cz, box, sc, sr)
         for q in range(k - k0):
             if mark[q]:
                 cand[c] = k0 + q

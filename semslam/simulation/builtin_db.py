@@ -64,7 +64,7 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
     model_views = None
     if n_model_views:
         model_views, _ = builtin_view_clouds(seed=seed, n_views=n_model_views, config=POSE_MODEL_KINECT)
-    from .cad_models import with_resting_up
+    from .model_views import with_resting_up
     from .objects import builtin_objects
 
     db = with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, **kwargs), builtin_objects())
