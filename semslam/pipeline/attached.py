@@ -44,12 +44,17 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._validation import as_float_array, check_choice, check_int, check_positive
+from ..detection import Detection
 from ..errors import DescriptorError, InputError
 from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import border_touched, principal_extent
 from ..segmentation.clusters import extract_euclidean_clusters
 from ..segmentation.primitives import Primitive, fit_primitive
-from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _detect_verified, _scan_angular_extent, _valid_points
+from ._scan_helpers import _input_indices_of
+from .class_measures import grid_area_m2
+from .hypothesis import Hypothesis, pose_and_verify
+from .scan_records import ClusterOutcome, ScanContext
+from .stages import scan_footprint
 
 __all__ = ["AttachedConfig", "find_attached", "remove_structure"]
 
@@ -255,36 +260,6 @@ def remove_structure(points_xyz_m: np.ndarray, normals_xyz: np.ndarray, *, toler
     return steps
 
 
-def _input_indices_of(seg: Any, idx: np.ndarray) -> np.ndarray:
-    """Sorted indices into the scan of the points averaged into the segmented-cloud rows ``idx``."""
-    from ._kernels import selected_input_indices
-
-    idx = np.sort(np.asarray(idx, dtype=np.int64))
-    if seg.point_voxel is None:
-        out = idx
-    else:
-        out = selected_input_indices(idx, seg.segmented_cloud.n_points, np.asarray(seg.point_voxel, dtype=np.int64))
-    return out if seg.kept_indices is None else seg.kept_indices[out]
-
-
-def _grid_area_m2(points: np.ndarray, leaf_m: float) -> float:
-    """Surface of ``points`` as the occupied cells of a ``leaf_m`` grid times the cell's face (m^2)."""
-    if not len(points):
-        return 0.0
-    keys = np.floor(points / leaf_m).astype(np.int64)
-    return float(len(np.unique(keys, axis=0))) * leaf_m * leaf_m
-
-
-def _class_area_m2(rec: Any, label: str, leaf_m: float) -> float:
-    """Median surface of the views of class ``label`` on a ``leaf_m`` grid (cached on ``rec``)."""
-    cache = rec.__dict__.setdefault("_attached_area_cache", {})
-    key = (label, round(leaf_m, 12))
-    if key not in cache:
-        areas = [_grid_area_m2(rec.db.view_cloud(int(i)).points_xyz_m, leaf_m) for i in rec.db.views_of(label)]
-        cache[key] = float(np.median(areas)) if areas else 0.0
-    return cache[key]
-
-
 def _eligible(outcome: ClusterOutcome, cfg: AttachedConfig) -> bool:
     if outcome.detection is not None:
         return False
@@ -311,84 +286,103 @@ def _piece_candidate(rec: Any, seg: Any, pts: np.ndarray, cloud_idx: np.ndarray,
         desc = rec.db.describe(cloud, seed=seed)
     except DescriptorError as exc:
         return f"no descriptor ({exc})"
-    match, label, view_index = rec._classify(desc)
+    match, label, view_index = rec.classify(desc)
     if label == UNKNOWN_LABEL:
         return f"unknown (nearest {match.nearest_label}, distance {match.distance:.3g} > {match.threshold:.3g})"
     longest = float(np.max(rec.db.class_info(label).size_xyz_m))
-    if cfg.size_tolerance is not None and extent[0] > _class_size_limit_m(rec, label):
+    if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
         return f"{label}, extent {extent[0]:.3f} m too big"
     if extent[0] < acfg.min_extent_share * longest:
         return f"{label}, extent {extent[0]:.3f} m < {acfg.min_extent_share:g} x {longest:.3f} m"
-    area_share = _grid_area_m2(q, leaf) / max(_class_area_m2(rec, label, leaf), 1e-12)
+    area_share = grid_area_m2(q, leaf) / max(rec.class_view_area_m2(label, leaf), 1e-12)
     if area_share < acfg.min_area_share:
         return f"{label}, surface {area_share:.2f} of its views' < {acfg.min_area_share:g}"
     return (match.distance / match.threshold, cloud, match, label, view_index, border)
 
 
-def find_attached(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], detections: list, *, seed: int,
-                  stamps: np.ndarray | None, stamp_s: float, scan_id: int, timings: dict) -> None:
-    """Search the rejected clusters of one scan for attached objects (module docstring); ``outcomes`` and
-    ``detections`` (those of :meth:`ScanRecognizer.recognize`) are updated in place; ``timings["attached"]`` gets
-    the time (ms, the pose of a found object included; that pose also counts in ``timings["pose"]``)."""
+def _best_piece(rec: Any, seg: Any, k: int, pts: np.ndarray, steps: list, seed: int, **piece_kw: Any) -> tuple | None:
+    """``(primitives removed, (score, j, piece, cloud, match, label, view_index, border, explained))``: the piece of
+    the first removal step in ``steps`` that frees a recognised one, nearest its view (distance over threshold),
+    or None. ``piece_kw``: the scan-wide arguments of :func:`_piece_candidate`."""
+    cloud_idx = seg.cluster_indices[k]
+    min_explained = rec.config.attached.min_explained_share
+    for prims, pieces, n_left in steps:
+        cands = []
+        for j, piece in enumerate(pieces):
+            explained = 1.0 - (n_left - len(piece)) / len(pts)
+            if explained < min_explained:  # the cluster is not this piece and its structure
+                cand = f"structure and piece explain {explained:.2f} of the cluster < {min_explained:g}"
+            else:
+                cand = _piece_candidate(rec, seg, pts, cloud_idx, piece, seed + j, **piece_kw)
+            if isinstance(cand, str):
+                _log.debug("cluster %d, step %d, piece %d (%d points): %s", k, len(prims), j, len(piece), cand)
+            else:
+                cands.append((cand[0], j, piece, *cand[1:], explained))
+        if cands:
+            return prims, min(cands, key=lambda c: (c[0], c[1]))
+    return None
+
+
+def _search_cluster(rec: Any, ctx: ScanContext, seg: Any, outcome: ClusterOutcome, seed: int, timings: dict,
+                    **piece_kw: Any) -> ClusterOutcome | None:
+    """The outcome of a rejected cluster in which an attached object was found (its structure removed, the piece
+    recognised, posed and verified), or None."""
     from ..descriptors import estimate_normals
 
+    cfg = rec.config
+    acfg: AttachedConfig = cfg.attached
+    k = outcome.cluster_index
+    tol = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
+    pts = np.ascontiguousarray(seg.clusters[k].points_xyz_m, dtype=np.float64)
+    normals = estimate_normals(pts, radius_m=acfg.normal_radius_factor * tol,
+                               viewpoint_xyz_m=piece_kw["viewpoint"]).normals_xyz
+    steps = remove_structure(pts, normals, tolerance_m=tol, config=acfg,
+                             min_piece_points=int(cfg.segmentation.min_cluster_size), seed=seed)
+    found = _best_piece(rec, seg, k, pts, steps, seed, **piece_kw)
+    if found is None:
+        return None
+    prims, (_, j, piece, cloud, match, label, view_index, border, explained) = found
+    raw_idx = _input_indices_of(seg, seg.cluster_indices[k][piece])
+    det = pose_and_verify(rec, ctx, seg, Hypothesis(raw_idx, cloud, label, view_index, match, border),
+                          seed=seed + 500, timings=timings, what=f"cluster {k}: attached")
+    if det is None:
+        return None
+    det.extras["attached"] = {"cluster": int(k), "piece_points": int(len(piece)),
+                              "piece_centroid_m": [float(v) for v in pts[piece].mean(axis=0)],
+                              "explained_share": float(explained),
+                              "structures": [p.to_dict() for p in prims]}
+    what = ", ".join(f"{p.kind}" + (f" r={1e3 * p.radius_m:.0f} mm" if p.kind == "cylinder" else "")
+                     for p in prims)
+    reason = (f"detected inside the cluster ({len(piece)} of {len(pts)} points) after removing its attachment "
+              f"({what})" + ("" if det.reliable else " (unreliable pose)")
+              + (", touches the scan border" if border else ""))
+    return dataclasses.replace(outcome, label=label, nearest_label=match.nearest_label, distance=match.distance,
+                               threshold=match.threshold, detection=det, reason=reason)
+
+
+def find_attached(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], detections: list[Detection],
+                  *, seed: int, timings: dict) -> tuple[list[ClusterOutcome], list[Detection]]:
+    """The attached-objects stage of one scan (module docstring): ``outcomes`` and ``detections`` (those of the
+    stages before) with the objects found in the rejected clusters (new lists). ``rec``: the
+    :class:`~semslam.pipeline.scan.ScanRecognizer`; ``timings["attached"]`` gets the time (ms, the pose of a found
+    object included; that pose also counts in ``timings["pose"]``)."""
     t0 = time.perf_counter()
     cfg = rec.config
     acfg: AttachedConfig = cfg.attached
+    outcomes, detections = list(outcomes), list(detections)
     timings["attached"] = 0.0
     eligible = sorted((o for o in outcomes if _eligible(o, acfg)), key=lambda o: -o.n_points)[:acfg.max_clusters]
     if not eligible:
-        return
+        return outcomes, detections
     tol = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
-    viewpoint = np.ascontiguousarray(scan.viewpoint_xyz_m, dtype=np.float64)
-    scan_extent = (_scan_angular_extent(_valid_points(scan, cfg.segmentation.drop_origin), viewpoint)
-                   if cfg.border != "keep" else None)
-    max_plausible = rec._max_plausible_extent_m()
-    min_piece = int(cfg.segmentation.min_cluster_size)
-    leaf = float(seg.resolved.get("voxel_leaf_m") or tol / 4.0)
+    piece_kw = {"leaf": float(seg.resolved.get("voxel_leaf_m") or tol / 4.0),
+                "scan_extent": scan_footprint(ctx.scan, cfg),
+                "viewpoint": np.ascontiguousarray(ctx.scan.viewpoint_xyz_m, dtype=np.float64),
+                "max_plausible": rec.max_plausible_extent_m()}
     for n, outcome in enumerate(eligible):
-        k = outcome.cluster_index
-        cloud_idx = seg.cluster_indices[k]
-        pts = np.ascontiguousarray(seg.clusters[k].points_xyz_m, dtype=np.float64)
-        normals = estimate_normals(pts, radius_m=acfg.normal_radius_factor * tol, viewpoint_xyz_m=viewpoint).normals_xyz
-        cseed = seed + 1000 * n
-        steps = remove_structure(pts, normals, tolerance_m=tol, config=acfg, min_piece_points=min_piece, seed=cseed)
-        found = None
-        for prims, pieces, n_left in steps:
-            cands = []
-            for j, piece in enumerate(pieces):
-                explained = 1.0 - (n_left - len(piece)) / len(pts)
-                if explained < acfg.min_explained_share:  # the cluster is not this piece and its structure
-                    cand = f"structure and piece explain {explained:.2f} of the cluster < {acfg.min_explained_share:g}"
-                else:
-                    cand = _piece_candidate(rec, seg, pts, cloud_idx, piece, cseed + j, leaf=leaf,
-                                            scan_extent=scan_extent, viewpoint=viewpoint, max_plausible=max_plausible)
-                if isinstance(cand, str):
-                    _log.debug("cluster %d, step %d, piece %d (%d points): %s", k, len(prims), j, len(piece), cand)
-                else:
-                    cands.append((cand[0], j, piece, *cand[1:], explained))
-            if cands:
-                found = (prims, min(cands, key=lambda c: (c[0], c[1])))
-                break
-        if found is None:
-            continue
-        prims, (_, j, piece, cloud, match, label, view_index, border, explained) = found
-        raw_idx = _input_indices_of(seg, cloud_idx[piece])
-        det = _detect_verified(rec, scan, seg, raw_idx, cloud, label, view_index, match, stamps, stamp_s, scan_id,
-                               cseed + 500, timings, border, f"cluster {k}: attached")
-        if det is None:
-            continue
-        det.extras["attached"] = {"cluster": int(k), "piece_points": int(len(piece)),
-                                  "piece_centroid_m": [float(v) for v in pts[piece].mean(axis=0)],
-                                  "explained_share": float(explained),
-                                  "structures": [p.to_dict() for p in prims]}
-        detections.append(det)
-        what = ", ".join(f"{p.kind}" + (f" r={1e3 * p.radius_m:.0f} mm" if p.kind == "cylinder" else "")
-                         for p in prims)
-        reason = (f"detected inside the cluster ({len(piece)} of {len(pts)} points) after removing its attachment "
-                  f"({what})" + ("" if det.reliable else " (unreliable pose)")
-                  + (", touches the scan border" if border else ""))
-        outcomes[k] = dataclasses.replace(outcomes[k], label=label, nearest_label=match.nearest_label,
-                                          distance=match.distance, threshold=match.threshold, detection=det,
-                                          reason=reason)
+        found = _search_cluster(rec, ctx, seg, outcome, seed + 1000 * n, timings, **piece_kw)
+        if found is not None:
+            detections.append(found.detection)
+            outcomes[outcome.cluster_index] = found
     timings["attached"] = (time.perf_counter() - t0) * 1e3
+    return outcomes, detections

@@ -35,10 +35,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._validation import check_int, check_positive
+from ..detection import Detection
 from ..errors import DescriptorError, InputError
 from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import principal_extent
-from ._scan_helpers import ClusterOutcome, _class_size_limit_m, _detect_verified, _input_indices
+from ._scan_helpers import _input_indices
+from .hypothesis import Hypothesis, pose_and_verify
+from .scan_records import ClusterOutcome, ScanContext
 
 __all__ = ["PartsConfig", "merge_parts"]
 
@@ -63,7 +66,7 @@ class PartsConfig:
         Share of every part's points that must lie within ``PoseConfig.icp_max_correspondence_m`` of the model
         under the union's pose (the union as a whole must pass ``PipelineConfig.verify_min_fitness``). Default
         0.8: on the catalogue benchmark (seed 0) the parts of the accepted unions scored 0.87-1.0 (a handwheel
-        fragment 0.871), and a rock beside an object scores below 0.5 (``tests/test_pipeline_parts.py``); None =
+        fragment 0.871), and a rock beside an object scores below 0.5 (``tests/pipeline/test_pipeline_parts.py``); None =
         ``verify_min_fitness``.
     max_unions : int
         Unions evaluated per scan at most (nearest gaps first), a bound on the time. Default 24.
@@ -159,23 +162,16 @@ def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points:
     return out
 
 
-def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], detections: list, *, seed: int,
-                stamps: np.ndarray | None, stamp_s: float, scan_id: int, timings: dict) -> None:
-    """Try unions of the unknown clusters of one scan (see the module docstring); ``outcomes`` and ``detections``
-    (those of :meth:`ScanRecognizer.recognize`) are updated in place. ``timings["parts"]`` gets the time (ms)."""
-    t0 = time.perf_counter()
+def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], eligible: list[int],
+                       seed: int, timings: dict) -> list[tuple]:
+    """The candidate unions of the ``eligible`` clusters that are recognised, verified and whose every part fits:
+    ``(points, fitness, cluster indices, detection, match, extent, touches border)`` each, in the order tried."""
     cfg = rec.config
     pcfg: PartsConfig = cfg.parts
-    eligible = [o.cluster_index for o in outcomes if _eligible(o)]
-    if cfg.border == "reject":
-        eligible = [k for k in eligible if not outcomes[k].touches_border]
-    timings["parts"] = 0.0
-    if len(eligible) < 2:
-        return
     tolerance = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
     pts = [seg.clusters[k].points_xyz_m for k in eligible]
     unions = _candidate_unions(len(eligible), _gaps(pts, pcfg.max_gap_factor * tolerance), pcfg)
-    max_plausible = rec._max_plausible_extent_m()
+    max_plausible = rec.max_plausible_extent_m()
     min_part = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
     accepted = []
     for u, members in enumerate(unions):
@@ -190,28 +186,47 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
             desc = rec.db.describe(cloud, seed=seed + u)
         except DescriptorError:
             continue
-        match, label, view_index = rec._classify(desc)
+        match, label, view_index = rec.classify(desc)
         if label == UNKNOWN_LABEL:
             _log.debug("union %s: unknown (nearest %s, distance %.3g > %.3g)", ks, match.nearest_label, match.distance,
                        match.threshold)
             continue
-        if cfg.size_tolerance is not None and extent[0] > _class_size_limit_m(rec, label):
+        if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
             _log.debug("union %s: extent %.3f m too big for %s", ks, extent[0], label)
             continue
         raw = [_input_indices(seg, k) for k in ks]
         raw_idx = np.sort(np.concatenate(raw))
         border = any(outcomes[k].touches_border for k in ks)
-        det = _detect_verified(rec, scan, seg, raw_idx, cloud, label, view_index, match, stamps, stamp_s, scan_id,
-                               seed + u, timings, border, f"union {ks}", scene_visibility=pcfg.scene_visibility)
+        det = pose_and_verify(rec, ctx, seg, Hypothesis(raw_idx, cloud, label, view_index, match, border),
+                              seed=seed + u, timings=timings, what=f"union {ks}",
+                              scene_visibility_cost=pcfg.scene_visibility)
         if det is None:
             continue
-        fits = _part_fitness(rec, det, label, view_index, [scan.points_xyz_m[r] for r in raw])
+        fits = _part_fitness(rec, det, label, view_index, [ctx.scan.points_xyz_m[r] for r in raw])
         if min(fits) < min_part:
             _log.debug("union %s: %s, a part off the surface (part fitness %s)", ks, label, np.round(fits, 3))
             continue
         det.extras["parts"] = [int(k) for k in ks]
         det.extras["part_fitness"] = fits
         accepted.append((len(raw_idx), det.fitness, ks, det, match, extent, border))
+    return accepted
+
+
+def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], detections: list[Detection], *,
+                seed: int, timings: dict) -> tuple[list[ClusterOutcome], list[Detection]]:
+    """The part-based stage of one scan (see the module docstring): ``outcomes`` and ``detections`` (those of the
+    stages before) with the unions of unknown clusters that were recognised (new lists). ``rec``: the
+    :class:`~semslam.pipeline.scan.ScanRecognizer`; ``timings["parts"]`` gets the time (ms)."""
+    t0 = time.perf_counter()
+    cfg = rec.config
+    outcomes, detections = list(outcomes), list(detections)
+    eligible = [o.cluster_index for o in outcomes if _eligible(o)]
+    if cfg.border == "reject":
+        eligible = [k for k in eligible if not outcomes[k].touches_border]
+    timings["parts"] = 0.0
+    if len(eligible) < 2:
+        return outcomes, detections
+    accepted = _recognized_unions(rec, ctx, seg, outcomes, eligible, seed, timings)
     used: set[int] = set()
     for _, _, ks, det, match, extent, border in sorted(accepted, key=lambda a: (-a[0], -a[1])):
         if used & set(ks):
@@ -225,3 +240,4 @@ def merge_parts(rec: Any, scan: Any, seg: Any, outcomes: list[ClusterOutcome], d
                                               distance=match.distance, threshold=match.threshold, detection=det,
                                               reason=reason)
     timings["parts"] = (time.perf_counter() - t0) * 1e3
+    return outcomes, detections

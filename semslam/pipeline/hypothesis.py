@@ -1,0 +1,157 @@
+"""The pose and verify stages of the recogniser, shared by every kind of hypothesis (a cluster, a union of parts, a
+piece found inside a cluster): :func:`pose_hypothesis` turns a recognised :class:`Hypothesis` into a
+:class:`~semslam.detection.Detection` (6-DoF pose, covariance, reliability), :func:`verification_failure` says why
+a detection fails hypothesis verification, :func:`pose_and_verify` does both for the opt-in stages.
+
+``rec`` is the :class:`~semslam.pipeline.scan.ScanRecognizer` (its ``config``, ``db`` and ``pose_model``)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..detection import Detection
+from ..pose.estimate import estimate_object_pose
+from ..segmentation.scene import SegmentationResult
+from .scan_records import ScanContext
+
+__all__ = ["Hypothesis", "pose_and_verify", "pose_hypothesis", "scene_visibility", "verification_failure"]
+
+
+@dataclass(frozen=True, eq=False)
+class Hypothesis:
+    """Points of a scan recognised as a class: what the pose stage aligns.
+
+    Attributes
+    ----------
+    raw_idx : ndarray of int
+        Indices into the scan of the hypothesis's points (the pose is estimated from them; empty: from ``cloud``).
+    cloud : PointCloud
+        Its points in the segmented cloud (the ones that were described and matched).
+    label : str
+    view_index : int
+        The matched view (``PipelineConfig(pose_model="view")`` aligns to it).
+    match : Match
+        The nearest-view match (its distance is the detection's score).
+    touches_border : bool
+        The points are cut by the scan's border (the pose is then marked unreliable).
+    """
+
+    raw_idx: np.ndarray
+    cloud: PointCloud
+    label: str
+    view_index: int
+    match: Any
+    touches_border: bool = False
+
+
+def verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None) -> str:
+    """Why a detection fails hypothesis verification (``PipelineConfig.verify_min_fitness`` /
+    ``verify_max_visibility``), or ``""`` when it passes (or verification is off). The visibility cost is tested
+    only when the pose search measured it (grid search; NaN otherwise)."""
+    if min_fitness is not None and not det.fitness >= min_fitness:
+        return f"pose verification: fitness {det.fitness:.3f} < {min_fitness:g}"
+    scene = "pose_visibility_scene" in det.extras
+    vis = float(det.extras.get("pose_visibility_scene" if scene else "pose_visibility", float("nan")))
+    if max_visibility is not None and vis == vis and vis > max_visibility:
+        return f"pose verification: {'scene ' if scene else ''}visibility cost {vis:.3f} > {max_visibility:g}"
+    return ""
+
+
+def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult | None, points: np.ndarray,
+                     model: Any, T_scanner_object: Any) -> float:
+    """The visibility cost of a pose against the whole scan about the cluster (``verify_visibility_image="scene"``,
+    :meth:`~semslam.pose.search.RangeImage.build_scene`): the segmented scan (planes included) for the free
+    space, its clusters as the only surfaces that may hide the object. NaN when the model has no visibility points."""
+    from ..pose.search import RangeImage
+
+    if model.visibility_points is None or not len(model.visibility_points):
+        return float("nan")
+    pc = pose_config
+    if seg is None:  # no segmentation given: the raw scan, any surface may hide
+        image = RangeImage.build_scene(scan.points_xyz_m, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m)
+    else:
+        cloud = seg.segmented_cloud.points_xyz_m
+        objects = cloud[np.concatenate(seg.cluster_indices)] if seg.cluster_indices else cloud[:0]
+        image = RangeImage.build_scene(cloud, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m,
+                                       occluder_points=np.vstack([objects, points]))
+    T_os = np.linalg.inv(T_scanner_object.matrix)
+    return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
+                                       model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])
+
+
+def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,
+                    timings: dict) -> Detection:
+    """The detection of ``hyp``: its pose (unless ``estimate_pose`` is off), covariance and reliability, stamped
+    with :meth:`ScanContext.stamp_of` its points; ``timings["pose"]`` accumulates the pose time. ``seg``: the
+    scan's segmentation, for the scene visibility cost (``verify_visibility_image="scene"``)."""
+    from ..geometry import RigidTransform
+
+    cfg, scan, raw_idx, label = rec.config, ctx.scan, hyp.raw_idx, hyp.label
+    stamp_s = ctx.stamp_of(raw_idx)
+    extras = {"view_index": int(hyp.view_index), "view_id": str(rec.db.view_ids[hyp.view_index]),
+              "cluster_points": len(raw_idx), "touches_border": bool(hyp.touches_border)}
+    if not cfg.estimate_pose:
+        centroid = hyp.cloud.points_xyz_m.mean(axis=0)
+        return Detection(label, hyp.match.distance, RigidTransform.from_rotation_translation(np.eye(3), centroid),
+                         np.diag([1e-2] * 3 + [1e4] * 3), n_points=hyp.cloud.n_points, reliable=False,
+                         stamp_s=stamp_s, scan_id=ctx.scan_id, extras=extras)
+    t0 = time.perf_counter()
+    info = rec.db.class_info(label)
+    model = rec.pose_model(label, hyp.view_index)
+    points = scan.points_xyz_m[raw_idx] if len(raw_idx) else hyp.cloud.points_xyz_m
+    up_scanner = ctx.up_scanner
+    up_object = rec.db.up_object(label) if up_scanner is not None else None
+    extras["pose_upright"] = up_object is not None
+    pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=cfg.pose, seed=seed,
+                                viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object
+                                is not None else None, up_object=up_object)
+    timings["pose"] += (time.perf_counter() - t0) * 1e3
+    cov = pose.covariance_6x6
+    ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
+    extras["pose_visibility"] = float(pose.visibility)
+    mode = cfg.verify_visibility_image
+    if cfg.verify_max_visibility is not None and (mode == "scene" or (mode == "border" and hyp.touches_border)):
+        extras["pose_visibility_scene"] = scene_visibility(cfg.pose, scan, seg, points, model, pose.T_scanner_object)
+    extras["pose_score_margin"] = float(pose.score_margin)
+    if ambiguous:
+        # The cluster is well aligned but another, non-equivalent orientation fits almost as well (a
+        # near-symmetric view): the position is trustworthy, the orientation is not. Say so in the
+        # covariance instead of dropping the detection; the filter's cascade then uses the position.
+        cov = cov.copy()
+        cov[3:, 3:] += np.eye(3) * cfg.ambiguous_rotation_variance_rad2
+        extras["orientation_ambiguous"] = True
+    return Detection(label, hyp.match.distance, pose.T_scanner_object, cov, score_kind="chi2",
+                     fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=len(points),
+                     reliable=bool((pose.reliable or ambiguous) and not hyp.touches_border),
+                     stamp_s=stamp_s, scan_id=ctx.scan_id, extras=extras)
+
+
+def pose_and_verify(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,
+                    timings: dict, what: str, scene_visibility_cost: bool = False) -> Detection | None:
+    """Pose and verify a hypothesis of an opt-in stage (a union of parts, a piece found inside a cluster): the
+    detection, or None when the pose fails or verification rejects it (logged with ``what``).
+    ``scene_visibility_cost``: verify the visibility cost against the whole scan (:func:`scene_visibility`) whatever
+    ``verify_visibility_image`` says (``PartsConfig.scene_visibility``)."""
+    from ..errors import RegistrationError
+
+    cfg = rec.config
+    try:
+        det = pose_hypothesis(rec, ctx, seg, hyp, seed=seed, timings=timings)
+    except RegistrationError:
+        return None
+    if scene_visibility_cost and cfg.verify_max_visibility is not None and "pose_visibility_scene" not in det.extras:
+        points = ctx.scan.points_xyz_m[hyp.raw_idx] if len(hyp.raw_idx) else hyp.cloud.points_xyz_m
+        model = rec.pose_model(hyp.label, hyp.view_index)
+        det.extras["pose_visibility_scene"] = scene_visibility(cfg.pose, ctx.scan, seg, points, model,
+                                                               det.T_sensor_object)
+    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
+    if failed:
+        logging.getLogger("semslam.pipeline").debug("%s: %s %s", what, hyp.label, failed)
+        return None
+    return det
