@@ -117,11 +117,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     Raises :class:`~semslam.errors.InputError` if ``out_dir`` is a file, a non-empty directory semslam did not
     write, or an earlier run (unless ``overwrite``): a run never mixes its files with another's.
     """
-    from .recognition import build_database, save_database
-    from .evaluation.classifier import leave_one_out
     from .dataset import read_mission, write_mission
-    from .simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
-    from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
+    from .simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
 
     cfg = DemoConfig() if config is None else config
     final = Path(out_dir)
@@ -137,31 +134,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         t_start = time.perf_counter()
 
         # 1. the database (built-in, or from the user's models) and its leave-one-out evaluation (Tables 1 and 2)
-        if objects is None:
-            views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
-                                        seed=cfg.seed, config=SURVEY_KINECT)
-            model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
-                                        seed=cfg.seed, config=POSE_MODEL_KINECT)
-        else:
-            from .simulation.cad_models import models_view_clouds
-
-            views, classes = stages.run("acquire database views of your models (Kinect-like, survey geometry)",
-                                        models_view_clouds, objects, seed=cfg.seed, config=SURVEY_KINECT)
-            model_views, _ = stages.run("acquire pose-model views of your models (Kinect-like, 60 deg, 0.7 m)",
-                                        models_view_clouds, objects, seed=cfg.seed, config=POSE_MODEL_KINECT,
-                                        tied_rests=True)
-        db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
-                        model_views=model_views, progress=progress)
-        save_database(db, out / "db.npz")
-        evaluations = {}
-        for descriptor in ("esf", "vfh"):
-            for clf_name in ("svm", "chi2"):
-                clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
-                res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
-                                 descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1,
-                                 progress=progress and clf_name == "svm")
-                evaluations[f"{descriptor}_{clf_name}"] = res
-                _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
+        db, evaluations = _database_stage(stages, cfg, objects, out, progress)
 
         # 2. the mission
         sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
@@ -185,13 +158,49 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
         _write_json(out / "metrics.json", metrics)
         _write_json(out / "config.json", {
             "demo": asdict(cfg), "simulator": sim_cfg.to_dict(), "pipeline": rec_out["pipeline_config"],
-            "slam": {m: r.metadata.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
+            "slam": {m: r.config.to_dict() for m, r in slam_results.items()}, "database": db.summary(),
         })
         from .report.build import build_report
 
         stages.run("write report", build_report, out)
     metrics["report"] = str(final / "report.html")
     return metrics
+
+
+def _database_stage(stages: "_Stages", cfg: DemoConfig, objects, out: Path, progress: bool):
+    """The view database (built-in objects, or the user's models), saved in the run, and its leave-one-out
+    evaluations (Tables 1 and 2 of the paper): ``(database, {"esf_svm": result, ...})``."""
+    from .evaluation.classifier import leave_one_out
+    from .recognition import build_database, save_database
+    from .simulation import builtin_view_clouds
+    from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
+
+    if objects is None:
+        views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
+                                    seed=cfg.seed, config=SURVEY_KINECT)
+        model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
+                                    seed=cfg.seed, config=POSE_MODEL_KINECT)
+    else:
+        from .simulation.cad_models import models_view_clouds
+
+        views, classes = stages.run("acquire database views of your models (Kinect-like, survey geometry)",
+                                    models_view_clouds, objects, seed=cfg.seed, config=SURVEY_KINECT)
+        model_views, _ = stages.run("acquire pose-model views of your models (Kinect-like, 60 deg, 0.7 m)",
+                                    models_view_clouds, objects, seed=cfg.seed, config=POSE_MODEL_KINECT,
+                                    tied_rests=True)
+    db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
+                    model_views=model_views, progress=progress)
+    save_database(db, out / "db.npz")
+    evaluations = {}
+    for descriptor in ("esf", "vfh"):
+        for clf_name in ("svm", "chi2"):
+            clf = "chi2" if clf_name == "chi2" else _svm_for_loo(db, descriptor, cfg)
+            res = stages.run(f"leave-one-out {descriptor.upper()} {clf_name}", leave_one_out, db,
+                             descriptor=descriptor, classifier=clf, seed=cfg.seed, n_jobs=-1,
+                             progress=progress and clf_name == "svm")
+            evaluations[f"{descriptor}_{clf_name}"] = res
+            _write_json(out / "evaluation" / f"loo_{descriptor}_{clf_name}.json", res.to_dict())
+    return db, evaluations
 
 
 def _svm_for_loo(db, descriptor: str, cfg: DemoConfig):

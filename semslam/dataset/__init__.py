@@ -6,7 +6,7 @@ optional ground truth (:class:`VehicleTruth`, :class:`ObjectTruth`). A mission d
 (:func:`read_mission`, :func:`write_mission`); the simulator and the ROS-bag reader are producers of it.
 """
 
-from .dataset import TIME_FIELDS, Dataset
+from .dataset import Dataset
 from .logs import (AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, ScanRecord, VehicleTruth,
                    check_stamps)
 from .mission_dir import FORMAT_VERSION, read_mission, vehicle_from_simulator_dict, write_mission
@@ -21,7 +21,7 @@ from .vehicle import (
 )
 
 __all__ = [
-    "TIME_FIELDS", "Dataset", "AttitudeLog", "DepthLog", "DvlLog", "PositionFixLog", "ObjectTruth", "ScanRecord",
+    "Dataset", "AttitudeLog", "DepthLog", "DvlLog", "PositionFixLog", "ObjectTruth", "ScanRecord",
     "VehicleTruth", "check_stamps", "FORMAT_VERSION", "read_mission", "vehicle_from_simulator_dict", "write_mission",
     "AttitudeSpec", "DepthSpec", "DvlSpec", "ScannerSpec", "VehicleDescription", "read_vehicle_toml",
     "write_vehicle_toml",

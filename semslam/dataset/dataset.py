@@ -17,13 +17,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError, PcdError
+from ..cloud import POINT_TIME_FIELDS
 from ..geodesy import GeodeticOrigin
-from ..geometry import RigidTransform
 from .logs import AttitudeLog, DepthLog, DvlLog, ObjectTruth, PositionFixLog, ScanRecord, VehicleTruth
 from .vehicle import VehicleDescription
 
-#: per-point time fields a scan may carry (seconds from the scan's start stamp)
-TIME_FIELDS = ("t", "time", "timestamp", "time_offset_s")
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,7 +107,7 @@ class Dataset:
         """Acquisition stamp (s) of every point of a scan: from a per-point time field (seconds from the
         scan's start), else from the ``line`` field and the scanner's ``line_count`` (line k at ``start + k
         (end - start) / (line_count - 1)``); None when the scan carries neither (every point at its end)."""
-        for name in TIME_FIELDS:
+        for name in POINT_TIME_FIELDS:
             if name in cloud.fields:
                 return record.start_stamp_s + np.asarray(cloud.fields[name], dtype=float)
         n_lines = self.vehicle.scanner.line_count
@@ -120,4 +118,3 @@ class Dataset:
         return record.start_stamp_s + line * step
 
 
-#: The former name, kept for code written against the simulator's mission type.

@@ -1,5 +1,5 @@
-"""Numba kernels of PCL's ESF (Ensemble of Shape Functions, 640 bins) in float32 arithmetic, and of
-glibc's ``rand()``. Don't call directly; use :func:`semslam.descriptors.compute_esf`.
+"""Numba kernels of PCL's ESF (Ensemble of Shape Functions, 640 bins) in float32 arithmetic (glibc's ``rand()``
+is in :mod:`._glibc_rand_kernels`). Don't call directly; use :func:`semslam.descriptors.compute_esf`.
 
 Every float operation below is float32 and in PCL 1.13's order (Eigen's 4-vector reductions sum
 as (x*x + z*z) + (y*y + 0)), so that the PCL sampler reproduces PCL bit for bit.
@@ -25,55 +25,6 @@ F63 = np.float32(63.0)
 F_AREA = np.float32(0.001)
 PIH = np.float32(np.float32(math.pi) / np.float32(2.0))
 WEIGHTS = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 2.0, 2.0, 2.0], dtype=np.float32)
-
-
-# ---------------------------------------------------------------- glibc rand() (TYPE_3)
-@njit(cache=True)
-def glibc_srand(seed):  # pragma: no cover - compiled
-    """State of glibc's ``random_r`` after ``srand(seed)`` and its 310 discarded outputs.
-
-    Returns an int64 array of 32: the last 31 values r_{i-31..i-1} (mod 2^32) in a ring, and at
-    index 31 the position i of the next value.
-    """
-    r = np.zeros(344, dtype=np.int64)
-    word = np.int64(seed) & 0xFFFFFFFF
-    if word >= 2**31:
-        word -= 2**32  # glibc stores the seed in an int32
-    if word == 0:
-        word = 1
-    r[0] = word
-    for i in range(1, 31):
-        # Schrage's method, with C's truncating division
-        hi = abs(word) // 127773
-        lo = abs(word) % 127773
-        if word < 0:
-            hi = -hi
-            lo = -lo
-        word = 16807 * lo - 2836 * hi
-        if word < 0:
-            word += 2147483647
-        r[i] = word
-    for i in range(31, 34):
-        r[i] = r[i - 31]
-    for i in range(34, 344):
-        r[i] = (r[i - 31] + r[i - 3]) & 0xFFFFFFFF
-    state = np.zeros(32, dtype=np.int64)
-    for i in range(313, 344):
-        state[i % 31] = r[i] & 0xFFFFFFFF
-    state[31] = 344
-    return state
-
-
-@njit(cache=True)
-def glibc_rand_fill(state, out):  # pragma: no cover - compiled
-    """Fill ``out`` (int64) with the next ``rand()`` outputs, advancing ``state`` in place."""
-    i = state[31]
-    for k in range(len(out)):
-        v = (state[(i - 31) % 31] + state[(i - 3) % 31]) & 0xFFFFFFFF
-        state[i % 31] = v
-        out[k] = v >> 1
-        i += 1
-    state[31] = i
 
 
 # ---------------------------------------------------------------- ESF
@@ -256,44 +207,8 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
         i3 = triples[t, 2]
         if i1 == i2 or i1 == i3 or i2 == i3:
             continue
-        x1 = local[i1, 0]
-        y1 = local[i1, 1]
-        z1 = local[i1, 2]
-        x2 = local[i2, 0]
-        y2 = local[i2, 1]
-        z2 = local[i2, 2]
-        x3 = local[i3, 0]
-        y3 = local[i3, 1]
-        z3 = local[i3, 2]
-        v21x = x2 - x1
-        v21y = y2 - y1
-        v21z = z2 - z1
-        v31x = x3 - x1
-        v31y = y3 - y1
-        v31z = z3 - z1
-        v23x = x2 - x3
-        v23y = y2 - y3
-        v23z = z2 - z3
-        a = _norm4(v21x, v21y, v21z)
-        b = _norm4(v31x, v31y, v31z)
-        c = _norm4(v23x, v23y, v23z)
-        s = (a + b + c) * F05
-        heron = s * (s - a) * (s - b) * (s - c)
-        if heron <= F_AREA:
-            continue
-        v21x /= a
-        v21y /= a
-        v21z /= a
-        v31x /= b
-        v31y /= b
-        v31z /= b
-        v23x /= c
-        v23y /= c
-        v23z /= c
-        th1 = _angle_bin(_dot4(v21x, v21y, v21z, v31x, v31y, v31z))
-        th2 = _angle_bin(_dot4(v23x, v23y, v23z, v31x, v31y, v31z))
-        th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
-        if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
+        ok, th1, th2, th3, heron = _triangle_angle_bins(local, i1, i2, i3)
+        if not ok:
             continue
         in1, n1 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i2, 0], vox[i2, 1], vox[i2, 2])
         in2, n2 = _lci(lut, vox[i1, 0], vox[i1, 1], vox[i1, 2], vox[i3, 0], vox[i3, 1], vox[i3, 2])
@@ -301,17 +216,7 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
         c1, r1 = _line_class(in1, n1)
         c2, r2 = _line_class(in2, n2)
         c3, r3 = _line_class(in3, n3)
-        vs = in1 + in2 + in3
-        pc = n1 + n2 + n3
-        if vs <= 21:
-            cls = 1
-            wt = F0
-        elif pc - vs < 4:
-            cls = 0
-            wt = F1
-        else:
-            cls = 2
-            wt = np.float32(vs) / np.float32(pc)
+        cls, wt = _triangle_class(in1 + in2 + in3, n1 + n2 + n3)
         out_i[t, _I_OK] = 1
         out_i[t, _I_TH1] = th1
         out_i[t, _I_TH2] = th2
@@ -323,14 +228,72 @@ def esf_evaluate(local, vox, lut, triples, out_i, out_f):  # pragma: no cover - 
         out_i[t, _I_N1] = n1
         out_i[t, _I_N2] = n2
         out_i[t, _I_N3] = n3
-        out_f[t, _F_D1] = _dist(x1, y1, z1, x2, y2, z2)
-        out_f[t, _F_D2] = _dist(x1, y1, z1, x3, y3, z3)
-        out_f[t, _F_D3] = _dist(x2, y2, z2, x3, y3, z3)
-        out_f[t, _F_R1] = r1
-        out_f[t, _F_R2] = r2
-        out_f[t, _F_R3] = r3
-        out_f[t, _F_AREA] = np.sqrt(np.sqrt(heron))
-        out_f[t, _F_WT] = wt
+        _store_triangle_floats(out_f, t, local, i1, i2, i3, r1, r2, r3, heron, wt)
+
+
+@njit(cache=True, inline="always")
+def _triangle_angle_bins(local, i1, i2, i3):  # pragma: no cover - compiled
+    """(ok, th1, th2, th3, heron) of the triangle of points i1, i2, i3 of ``local``: ``ok`` False (the rest
+    zero) when it is degenerate (Heron's s(s-a)(s-b)(s-c) <= 0.001) or an angle bin is not in [0, BINS)."""
+    x1 = local[i1, 0]
+    y1 = local[i1, 1]
+    z1 = local[i1, 2]
+    v21x = local[i2, 0] - x1
+    v21y = local[i2, 1] - y1
+    v21z = local[i2, 2] - z1
+    v31x = local[i3, 0] - x1
+    v31y = local[i3, 1] - y1
+    v31z = local[i3, 2] - z1
+    v23x = local[i2, 0] - local[i3, 0]
+    v23y = local[i2, 1] - local[i3, 1]
+    v23z = local[i2, 2] - local[i3, 2]
+    a = _norm4(v21x, v21y, v21z)
+    b = _norm4(v31x, v31y, v31z)
+    c = _norm4(v23x, v23y, v23z)
+    s = (a + b + c) * F05
+    heron = s * (s - a) * (s - b) * (s - c)
+    if heron <= F_AREA:
+        return False, 0, 0, 0, F0
+    v21x /= a
+    v21y /= a
+    v21z /= a
+    v31x /= b
+    v31y /= b
+    v31z /= b
+    v23x /= c
+    v23y /= c
+    v23z /= c
+    th1 = _angle_bin(_dot4(v21x, v21y, v21z, v31x, v31y, v31z))
+    th2 = _angle_bin(_dot4(v23x, v23y, v23z, v31x, v31y, v31z))
+    th3 = _angle_bin(_dot4(v23x, v23y, v23z, v21x, v21y, v21z))
+    if th1 < 0 or th1 >= BINS or th2 < 0 or th2 >= BINS or th3 < 0 or th3 >= BINS:
+        return False, 0, 0, 0, F0
+    return True, th1, th2, th3, heron
+
+
+@njit(cache=True, inline="always")
+def _triangle_class(vs, pc):  # pragma: no cover - compiled
+    """PCL's class of a triangle (0 in / 1 out / 2 mixed) and its in-ratio weight from the occupied (``vs``) and
+    visited (``pc``) voxels of its three lines."""
+    if vs <= 21:
+        return 1, F0
+    if pc - vs < 4:
+        return 0, F1
+    return 2, np.float32(vs) / np.float32(pc)
+
+
+@njit(cache=True, inline="always")
+def _store_triangle_floats(out_f, t, local, i1, i2, i3, r1, r2, r3, heron, wt):  # pragma: no cover - compiled
+    """Row ``t`` of :func:`esf_evaluate`'s float32 results: side lengths, line in-ratios, square-rooted area and
+    the triangle's in-ratio weight."""
+    out_f[t, _F_D1] = _dist(local[i1, 0], local[i1, 1], local[i1, 2], local[i2, 0], local[i2, 1], local[i2, 2])
+    out_f[t, _F_D2] = _dist(local[i1, 0], local[i1, 1], local[i1, 2], local[i3, 0], local[i3, 1], local[i3, 2])
+    out_f[t, _F_D3] = _dist(local[i2, 0], local[i2, 1], local[i2, 2], local[i3, 0], local[i3, 1], local[i3, 2])
+    out_f[t, _F_R1] = r1
+    out_f[t, _F_R2] = r2
+    out_f[t, _F_R3] = r3
+    out_f[t, _F_AREA] = np.sqrt(np.sqrt(heron))
+    out_f[t, _F_WT] = wt
 
 
 @njit(cache=True, nogil=True)

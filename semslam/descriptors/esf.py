@@ -7,6 +7,7 @@ import numpy as np
 from .._validation import as_float_array, as_rng, check_choice, check_int
 from ..errors import DescriptorError
 from . import _esf_kernels as K
+from ._glibc_rand_kernels import glibc_rand_fill, glibc_srand
 
 ESF_SIZE = 640
 #: Give up after this many candidate triangles per requested sample (PCL would loop forever).
@@ -70,7 +71,13 @@ def compute_esf(
     if not maxd > 0:
         raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points. Got {n} identical points.")
     draw = _sampler(sampler, seed, n, caller)
+    out_i, out_f, end = _evaluated_samples(local, vox, lut, draw, n_samples, caller)
+    return K.esf_histogram(out_i, out_f, end)
 
+
+def _evaluated_samples(local, vox, lut, draw, n_samples: int, caller: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """Draw and evaluate candidate triples in chunks until ``n_samples`` are accepted: every candidate's results in
+    draw order (``K.esf_evaluate``'s integer and float rows) and the row after the last accepted sample counted."""
     accepted = 0
     drawn = 0
     end = -1
@@ -98,7 +105,7 @@ def compute_esf(
         drawn += chunk
         if accepted == n_samples:
             end = stop
-    return K.esf_histogram(out_i, out_f, end)
+    return out_i, out_f, end
 
 
 def _grown(a: np.ndarray, rows: int) -> np.ndarray:
@@ -111,7 +118,7 @@ def glibc_rand(seed: int, n: int) -> np.ndarray:
     """The first ``n`` values of glibc's ``rand()`` after ``srand(seed)`` (int64 array)."""
     seed = check_int("seed", seed, caller="glibc_rand", minimum=0, maximum=2**32 - 1)
     out = np.empty(check_int("n", n, caller="glibc_rand", minimum=0), dtype=np.int64)
-    K.glibc_rand_fill(K.glibc_srand(seed), out)
+    glibc_rand_fill(glibc_srand(seed), out)
     return out
 
 
@@ -120,11 +127,11 @@ def _sampler(sampler, seed, n, caller):
         if seed is None:
             seed = 0
         seed = check_int("seed", seed, caller=caller + ' (sampler="pcl")', minimum=0, maximum=2**32 - 1)
-        state = K.glibc_srand(seed)
+        state = glibc_srand(seed)
 
         def draw(m: int) -> np.ndarray:
             out = np.empty(3 * m, dtype=np.int64)
-            K.glibc_rand_fill(state, out)  # one rand() per index, i1 i2 i3 in order, as PCL
+            glibc_rand_fill(state, out)  # one rand() per index, i1 i2 i3 in order, as PCL
             return (out % n).reshape(m, 3)
 
         return draw

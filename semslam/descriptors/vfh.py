@@ -6,7 +6,7 @@ import numpy as np
 
 from .._validation import as_float_array, check_choice
 from ..errors import DescriptorError
-from ._pair_kernels import vfh_f32
+from ._vfh_kernels import vfh_f32
 
 VFH_SIZE = 308
 VFH_VARIANTS = ("pcl-1.13", "pcl-1.8", "rusu2010")
@@ -25,7 +25,7 @@ def compute_vfh(
     """VFH global descriptor of a cluster with normals, as PCL's ``VFHEstimation`` (defaults as PCL's).
 
     Layout: [f1 0-44 | f2 45-89 | f3 90-134 | f4 135-179 | viewpoint 180-307]. f1..f3 are the pair
-    features (see :func:`~semslam.descriptors._pair_kernels.pair_features_f32`) of the centroid with the
+    features (see :func:`~semslam.descriptors._vfh_kernels.pair_features_f32`) of the centroid with the
     mean normal (not re-normalised) against every point with its normal; each adds 100/(N-1). The
     viewpoint part bins (n . d + 1)/2 of every normal n into 128 bins, each adding 100/N, where d is
     the direction from the centroid to the viewpoint.
@@ -33,7 +33,7 @@ def compute_vfh(
     Every step runs in PCL's precision: points, normals, centroid, mean normal, the pair features
     (``acosf``, ``atan2f``, Eigen's summation order) and the histogram are float32, the bin indices
     double from the float features, so a feature on a bin edge falls in PCL's bin and the output is
-    PCL 1.13's bit for bit (:func:`~semslam.descriptors._pair_kernels.vfh_f32`). Inputs are rounded to
+    PCL 1.13's bit for bit (:func:`~semslam.descriptors._vfh_kernels.vfh_f32`). Inputs are rounded to
     float32 first, as PCL stores them.
 
     Parameters
@@ -72,19 +72,7 @@ def compute_vfh(
         Bad shapes, non-finite points, fewer than 2 points, or fewer than 2 finite normals.
     """
     caller = "compute_vfh"
-    pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller, error=DescriptorError)
-    nrm = as_float_array("normals_xyz", normals_xyz, (len(pts), 3), caller=caller, finite=False,
-                         error=DescriptorError)
-    vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=caller, error=DescriptorError)
-    check_choice("variant", variant, VFH_VARIANTS, caller=caller)
-    if len(pts) < 2:
-        raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must have at least 2 points. Got {len(pts)} instead.")
-    valid = np.isfinite(nrm).all(axis=1)
-    n = int(valid.sum())
-    if n < 2:
-        raise DescriptorError(
-            f"The 'normals_xyz' argument of {caller} must have at least 2 finite normals. Got {n} instead."
-        )
+    pts, nrm, vp, valid = _checked_inputs(points_xyz_m, normals_xyz, viewpoint_xyz_m, variant, caller)
     # PCL works in float32 (points, normals, features, histogram): so do we, step for step, so that a feature
     # on a bin edge falls in PCL's bin (see vfh_f32). The float32 result is returned as float64.
     hist = np.zeros(VFH_SIZE, dtype=np.float32)
@@ -99,3 +87,23 @@ def compute_vfh(
             f"The 'viewpoint_xyz_m' argument of {caller} must differ from the cluster's centroid. Got {vp.tolist()}."
         )
     return hist.astype(np.float64)
+
+
+def _checked_inputs(
+    points_xyz_m, normals_xyz, viewpoint_xyz_m, variant: str, caller: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The points, normals and viewpoint of :func:`compute_vfh` as float arrays, and which normals are finite."""
+    pts = as_float_array("points_xyz_m", points_xyz_m, (None, 3), caller=caller, error=DescriptorError)
+    nrm = as_float_array("normals_xyz", normals_xyz, (len(pts), 3), caller=caller, finite=False,
+                         error=DescriptorError)
+    vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=caller, error=DescriptorError)
+    check_choice("variant", variant, VFH_VARIANTS, caller=caller)
+    if len(pts) < 2:
+        raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must have at least 2 points. Got {len(pts)} instead.")
+    valid = np.isfinite(nrm).all(axis=1)
+    n = int(valid.sum())
+    if n < 2:
+        raise DescriptorError(
+            f"The 'normals_xyz' argument of {caller} must have at least 2 finite normals. Got {n} instead."
+        )
+    return pts, nrm, vp, valid

@@ -23,6 +23,7 @@ from ..errors import SlamError
 from ..simulation.truth_slam import run_truth_slam
 from ..slam import MODES, SlamConfig
 from ..evaluation.metrics import anees, chi2_band, nees
+from ..modes import BACKENDS
 
 
 def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
@@ -152,6 +153,30 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     ANEES (position 3 dof; pose 6 dof for classes without a continuous symmetry) over all runs' final maps.
     """
     n_runs = check_int("n_runs", n_runs, caller="run_montecarlo", minimum=1)
+    modes = _checked_modes(modes, backend)
+    opts = {"seed": seed, "modes": modes, "yaw_bias_rad": math.radians(yaw_bias_deg), "source": source, "loops": loops,
+            "yaw_bias_walk_rad_per_sqrt_s": math.radians(yaw_bias_walk_deg_per_sqrt_s), "white_dvl": white_dvl,
+            "config_overrides": dict(config_overrides or {}), "backend": backend, "surveyed": tuple(surveyed)}
+    runs = _run_all(n_runs, modes, opts, progress=progress, log=log, jobs=jobs, scheduler=scheduler, client=client)
+    nees_r, nees_s, sig_r, err_r, end_r, met, stamps = _collect(runs, modes)
+    K = len(stamps)
+    summary = {}
+    out = {}
+    for mode in modes:
+        N = np.array([a[:K] for a in nees_r[mode]])
+        S3 = np.array([a[:K] for a in sig_r[mode]])
+        E = np.array([a[:K] for a in err_r[mode]])
+        out[mode] = (N, S3, E)
+        summary[mode] = _mode_summary(N, S3, E, met[mode], nees_s[mode], n_runs, K)
+    _paired(summary, met, modes)
+    _dr_ratios(summary, modes)
+    ends = {m: np.array([a[:K] for a in end_r[m]]) if len(end_r[m]) == n_runs else None for m in modes}
+    settings = {k: v for k, v in opts.items() if k not in ("modes", "backend")}
+    return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
+                            {m: out[m][2] for m in modes}, met, summary, ends, backend, settings)
+
+
+def _checked_modes(modes, backend: str) -> tuple:
     if isinstance(modes, str) or not len(tuple(modes)):
         raise SlamError(f"The 'modes' argument of run_montecarlo must be a non-empty sequence of modes from {MODES}. "
                         f"Got {modes!r} instead.")
@@ -159,19 +184,14 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
     for mode in modes:
         if mode not in MODES:
             raise SlamError(f"The 'modes' argument of run_montecarlo must contain only {MODES}. Got {mode!r} instead.")
-    if backend not in ("ekf", "isam2", "batch"):
-        raise SlamError(f"The 'backend' argument of run_montecarlo must be one of ('ekf', 'isam2', 'batch'). "
+    if backend not in BACKENDS:
+        raise SlamError(f"The 'backend' argument of run_montecarlo must be one of {BACKENDS}. "
                         f"Got {backend!r} instead.")
-    nees_r: dict = {m: [] for m in modes}
-    nees_s: dict = {m: [] for m in modes}
-    sig_r: dict = {m: [] for m in modes}
-    err_r: dict = {m: [] for m in modes}
-    end_r: dict = {m: [] for m in modes}
-    met: dict = {m: [] for m in modes}
-    stamps = None
-    opts = {"seed": seed, "modes": modes, "yaw_bias_rad": math.radians(yaw_bias_deg), "source": source, "loops": loops,
-            "yaw_bias_walk_rad_per_sqrt_s": math.radians(yaw_bias_walk_deg_per_sqrt_s), "white_dvl": white_dvl,
-            "config_overrides": dict(config_overrides or {}), "backend": backend, "surveyed": tuple(surveyed)}
+    return modes
+
+
+def _run_all(n_runs: int, modes: tuple, opts: dict, *, progress, log, jobs, scheduler, client) -> list:
+    """Every run's outcome, in run order, on the chosen engine (progress and log lines as each run ends)."""
     with progress_steps(progress, n_runs * len(modes), "Monte Carlo", "run") as step:
         def done(i: int, run: dict) -> None:  # as each run ends (in any order on a cluster)
             for mode in modes:
@@ -181,8 +201,20 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
 
         from ..batch.engine import map_tasks
 
-        runs = map_tasks(partial(_montecarlo_run, opts=opts), range(n_runs), jobs=jobs, scheduler=scheduler,
+        return map_tasks(partial(_montecarlo_run, opts=opts), range(n_runs), jobs=jobs, scheduler=scheduler,
                          client=client, on_result=done)
+
+
+def _collect(runs: list, modes: tuple):
+    """Per mode, the runs' NEES, smoothed NEES, 3-sigma, error and whole-dive error series and metrics; the
+    shortest run's stamps."""
+    nees_r: dict = {m: [] for m in modes}
+    nees_s: dict = {m: [] for m in modes}
+    sig_r: dict = {m: [] for m in modes}
+    err_r: dict = {m: [] for m in modes}
+    end_r: dict = {m: [] for m in modes}
+    met: dict = {m: [] for m in modes}
+    stamps = None
     for run in runs:  # in run order, whatever the engine: the summary does not depend on it
         for mode in modes:
             r = run[mode]
@@ -196,46 +228,42 @@ def run_montecarlo(n_runs: int, *, modes=("dr", "position", "pose"), yaw_bias_de
             met[mode].append(r["metrics"])
             if stamps is None or len(r["stamps_s"]) < len(stamps):
                 stamps = r["stamps_s"]
-    K = len(stamps)
-    summary = {}
-    out = {}
-    for mode in modes:
-        N = np.array([a[:K] for a in nees_r[mode]])
-        S3 = np.array([a[:K] for a in sig_r[mode]])
-        E = np.array([a[:K] for a in err_r[mode]])
-        out[mode] = (N, S3, E)
-        a = anees(N, 3)
-        ate = np.array([m["ate_rmse_m"] for m in met[mode]])
-        summary[mode] = {
-            "ate_rmse_mean_m": float(ate.mean()), "ate_rmse_median_m": float(np.median(ate)),
-            "ate_rmse_max_m": float(ate.max()),
-            "final_error_mean_m": float(E[:, -1].mean()),
-            "final_3sigma_mean_m": float(S3[:, -1].mean()), "max_3sigma_mean_m": float(S3.max(axis=1).mean()),
-            "anees_mean": a["anees_mean"], "band": list(chi2_band(3, n_runs)), "fraction_in_band": a["fraction_in_band"],
-            "n_landmarks_mean": float(np.mean([m["n_landmarks"] for m in met[mode]])),
-            "cross_class_updates": int(sum(m["cross_class_updates"] for m in met[mode])),
-            "sigma3_at_thirds_mean_m": [float(S3[:, min(K - 1, int(round(f * (K - 1))))].mean()) for f in (1 / 3, 2 / 3, 1.0)],
-            "landmark_nees_position": _landmark_anees([m.get("landmark_nees_position", []) for m in met[mode]], 3),
-            "landmark_nees_pose": _landmark_anees([m.get("landmark_nees_pose", []) for m in met[mode]], 6),
-            "dvl_rejected_mean": float(np.mean([m.get("dvl_rejected", 0) for m in met[mode]])),
-        }
-        smoothed = [m.get("smoother", {}).get("ate_rmse_m") for m in met[mode]]
-        if nees_s[mode] and len(nees_s[mode]) == n_runs and all(v is not None for v in smoothed):
-            a_s = anees(np.array([v[:K] for v in nees_s[mode]]), 3)
-            summary[mode]["smoothed"] = {"ate_rmse_mean_m": float(np.mean(smoothed)),
-                                         "ate_rmse_max_m": float(np.max(smoothed)),
-                                         "anees_mean": a_s["anees_mean"], "fraction_in_band": a_s["fraction_in_band"]}
-    _paired(summary, met, modes)
+    return nees_r, nees_s, sig_r, err_r, end_r, met, stamps
+
+
+def _mode_summary(N: np.ndarray, S3: np.ndarray, E: np.ndarray, met: list, nees_s: list, n_runs: int, K: int) -> dict:
+    """One mode's summary over the runs (see :func:`run_montecarlo`)."""
+    a = anees(N, 3)
+    ate = np.array([m["ate_rmse_m"] for m in met])
+    summary = {
+        "ate_rmse_mean_m": float(ate.mean()), "ate_rmse_median_m": float(np.median(ate)),
+        "ate_rmse_max_m": float(ate.max()),
+        "final_error_mean_m": float(E[:, -1].mean()),
+        "final_3sigma_mean_m": float(S3[:, -1].mean()), "max_3sigma_mean_m": float(S3.max(axis=1).mean()),
+        "anees_mean": a["anees_mean"], "band": list(chi2_band(3, n_runs)), "fraction_in_band": a["fraction_in_band"],
+        "n_landmarks_mean": float(np.mean([m["n_landmarks"] for m in met])),
+        "cross_class_updates": int(sum(m["cross_class_updates"] for m in met)),
+        "sigma3_at_thirds_mean_m": [float(S3[:, min(K - 1, int(round(f * (K - 1))))].mean()) for f in (1 / 3, 2 / 3, 1.0)],
+        "landmark_nees_position": _landmark_anees([m.get("landmark_nees_position", []) for m in met], 3),
+        "landmark_nees_pose": _landmark_anees([m.get("landmark_nees_pose", []) for m in met], 6),
+        "dvl_rejected_mean": float(np.mean([m.get("dvl_rejected", 0) for m in met])),
+    }
+    smoothed = [m.get("smoother", {}).get("ate_rmse_m") for m in met]
+    if nees_s and len(nees_s) == n_runs and all(v is not None for v in smoothed):
+        a_s = anees(np.array([v[:K] for v in nees_s]), 3)
+        summary["smoothed"] = {"ate_rmse_mean_m": float(np.mean(smoothed)), "ate_rmse_max_m": float(np.max(smoothed)),
+                               "anees_mean": a_s["anees_mean"], "fraction_in_band": a_s["fraction_in_band"]}
+    return summary
+
+
+def _dr_ratios(summary: dict, modes: tuple) -> None:
+    """Each mode's DR/mode ATE ratio (filtered, and smoothed when both have one), when DR ran."""
     if "dr" in summary:
         for mode in modes:
             summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(summary[mode]["ate_rmse_mean_m"], 1e-12)
             if "smoothed" in summary[mode] and "smoothed" in summary["dr"]:
                 summary[mode]["smoothed"]["dr_over_mode_ate"] = (summary["dr"]["smoothed"]["ate_rmse_mean_m"]
                                                                  / max(summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12))
-    ends = {m: np.array([a[:K] for a in end_r[m]]) if len(end_r[m]) == n_runs else None for m in modes}
-    settings = {k: v for k, v in opts.items() if k not in ("modes", "backend")}
-    return MonteCarloResult(n_runs, modes, stamps, {m: out[m][0] for m in modes}, {m: out[m][1] for m in modes},
-                            {m: out[m][2] for m in modes}, met, summary, ends, backend, settings)
 
 
 #: mode -> the mode it is meant to improve on (paired comparison on the same missions)

@@ -60,7 +60,7 @@ class OutageRow:
 
 
 def run_outage_montecarlo(n_runs: int, *, scenarios=("first_half", "middle", "last_third", "whole"),
-                          modes=("dr", "position", "pose", "pose+heading"), seed: int = 1, loops: int = 3,
+                          modes=MODES, seed: int = 1, loops: int = 3,
                           config: SlamConfig | None = None, heading_bias_from_prior: bool = True,
                           progress: Progress = False) -> list[OutageRow]:
     """Run ``n_runs`` missions (seeds ``seed .. seed + n_runs - 1``) of every outage scenario in every mode.

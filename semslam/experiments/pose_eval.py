@@ -1,5 +1,5 @@
 """Evaluation of object pose estimation on the simulator's own laser scans (not a public API: used by
-``tests/test_pose.py`` and ``benchmarks/pose_accuracy.py``).
+``tests/pose/test_pose.py`` and ``benchmarks/pose_accuracy.py``).
 
 The clusters are the ground-truth instance points of each object in each scan (segmentation is a
 separate stage), voxelised like the pipeline. Each laser line is in the scanner frame at its own stamp;

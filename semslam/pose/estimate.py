@@ -1,15 +1,16 @@
-"""Pose of a recognised object: a global search over a deterministic SO(3) grid scored with the model's
-distance field and a visibility (free-space) term (:mod:`.search`; ranked coarse to fine: 512 then the
-children of the best 64 in the 4096 grid), point-to-plane ICP of the best distinct hypotheses (numba, on
-the distance field's nearest-point candidates: :func:`._icp_kernels.icp_plane_field`), selection by the same
-score after ICP, then the orientation canonicalised under the object's symmetry and a 6x6 covariance (order
-x y z roll pitch yaw, see :mod:`.covariance`).
-The papers' FPFH + prerejective RANSAC remains available (``PoseConfig(coarse_method="ransac")``).
+"""Pose of a recognised object (:func:`estimate_object_pose`): by default a global search over a deterministic
+SO(3) grid scored with the model's distance field and a visibility (free-space) term (:mod:`.search`; ranked
+coarse to fine: 512 then the children of the best 64 in the 4096 grid), point-to-plane ICP of the best distinct
+hypotheses (numba, on the distance field's nearest-point candidates:
+:func:`semslam.registration._icp_kernels.icp_plane_field`, see :mod:`.icp_refine`), selection by the same score
+after ICP, then the orientation canonicalised under the object's symmetry and a 6x6 covariance (order x y z roll
+pitch yaw, see :mod:`.covariance`). The papers' FPFH + prerejective RANSAC remains available
+(``PoseConfig(coarse_method="ransac")``); a prior pose (``init_T_scanner_object``) skips the search.
 
-The model is prepared once per class (:func:`.pose_model.prepare_pose_model`): either the matched database view, or
-all views of the class fused in the object frame (better: see ``benchmarks/pose_accuracy.py``). The cluster is the SOURCE and the model the TARGET, so every cluster point
-has a model point to match and the ICP uses the model's clean normals; the result is inverted into
-``T_scanner_object``.
+The model is prepared once per class (:func:`.model.prepare_pose_model`): either the matched database view, or
+all views of the class fused in the object frame (better: see ``benchmarks/pose_accuracy.py``). The cluster is
+the SOURCE and the model the TARGET, so every cluster point has a model point to match and the ICP uses the
+model's clean normals; the result is inverted into ``T_scanner_object``.
 """
 
 from __future__ import annotations
@@ -24,17 +25,18 @@ import small_gicp
 from .._validation import as_float_array
 from ..cloud import PointCloud
 from ..errors import InputError, RegistrationError
-from ..geometry import RigidTransform, orthonormalize_transform
+from ..geometry import RigidTransform
 from ..symmetry import Symmetry
-from ..registration.coarse import align_prerejective
-from .covariance import calibration_of, pose_covariance, widen_untrusted
-from ..registration._icp_kernels import icp_plane_field, icp_plane_field_batch
-from ..registration.icp import ICP_METHODS, align_icp
-from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
+from ..registration._icp_kernels import icp_plane_field_batch
 from ..registration.ambiguity import half_turns
-from ..registration.result import RegistrationResult, _inlier_statistics_of_distances
+from ..registration.coarse import align_prerejective
+from ..registration.result import RegistrationResult
 from ..registration.upright import upright_rotations
-from .search import RangeImage, rotation_distances, search_hypotheses
+from .covariance import calibration_of, pose_covariance, widen_untrusted
+from .icp_refine import (  # noqa: F401 (_final_score, _icp_field_nearest: tests use them here)
+    _final_score, _final_scores, _icp_field_nearest, _icp_small_gicp, _refine, _small_gicp_T, back_facing_shares)
+from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
+from .search import rotation_distances, search_hypotheses
 
 __all__ = ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "pose_verdict", "prepare_pose_model",
            "back_facing_shares"]
@@ -125,6 +127,9 @@ def estimate_object_pose(
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
+    By default a grid search over SO(3) then ICP of its best hypotheses; FPFH + prerejective RANSAC then ICP with
+    ``PoseConfig(coarse_method="ransac")``; ICP alone from ``init_T_scanner_object`` when given.
+
     Parameters
     ----------
     cluster_points_scanner : PointCloud or array-like (N, 3)
@@ -149,7 +154,8 @@ def estimate_object_pose(
         The up direction in the scanner frame (from the vehicle's attitude, a level camera) and in the
         object frame (recorded by ``db build --fuse --up``). Given both, the grid search scans only
         orientations that keep them within a few degrees of each other
-        (:func:`~semslam.registration.upright.upright_rotations`) instead of all of SO(3): an object cannot be found upside down.
+        (:func:`~semslam.registration.upright.upright_rotations`) instead of all of SO(3): an object cannot be
+        found upside down.
 
     Returns
     -------
@@ -159,14 +165,48 @@ def estimate_object_pose(
     ------
     RegistrationError
         When the cluster has fewer than ``config.min_points`` points.
+    InputError
+        On a ``symmetry`` that is not a Symmetry, a badly shaped cluster or viewpoint, only one of the up
+        directions, or a model prepared without what the chosen method needs.
     """
     t0 = time.perf_counter()
     model = model_points_object if isinstance(model_points_object, PoseModel) else \
         prepare_pose_model(model_points_object, config)
     cfg = model.config
+    sym = _checked_symmetry(symmetry)
+    cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
+    t1 = time.perf_counter()
+    alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object)
+    return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
+
+
+@dataclass
+class _Alignment:
+    """The cluster aligned onto the model (before the covariance): the final ICP result, whether the coarse
+    step converged and its fitness, the visibility cost and score margin (grid search; NaN otherwise), extras,
+    the nearest model points of the final ICP (or None) and the end times of the coarse step and the ICP."""
+
+    fine: RegistrationResult
+    coarse_ok: bool
+    coarse_fitness: float
+    visibility: float
+    margin: float
+    extras: dict
+    nearest: Any
+    t2: float
+    t3: float
+
+
+def _checked_symmetry(symmetry: Any) -> Symmetry:
     sym = symmetry if symmetry is not None else Symmetry()
     if not isinstance(sym, Symmetry):
         raise InputError(f"The 'symmetry' argument of {_CALLER} must be a Symmetry. Got {type(sym).__name__} instead.")
+    return sym
+
+
+def _checked_cluster(cluster_points_scanner: Any, viewpoint_xyz_m: Any, cfg: PoseConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The cluster points (N, 3) and the scanner origin (3,), both in the scanner frame; a RegistrationError
+    when the cluster has fewer than ``cfg.min_points`` points."""
     if isinstance(cluster_points_scanner, PointCloud):
         cluster, vp = cluster_points_scanner.points_xyz_m, cluster_points_scanner.viewpoint_xyz_m
     else:
@@ -176,145 +216,57 @@ def estimate_object_pose(
     if len(cluster) < cfg.min_points:
         raise RegistrationError(f"The cluster given to {_CALLER} has {len(cluster)} points; at least "
                                 f"{cfg.min_points} are needed (PoseConfig.min_points).")
-    t1 = time.perf_counter()
-    margin, vis, extras, nearest = float("nan"), float("nan"), {}, None
+    return cluster, vp
+
+
+def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
+                   init_T_scanner_object: Any, up_scanner: Any, up_object: Any) -> _Alignment:
+    """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
+    the grid search with ICP of its best hypotheses (the default)."""
+    nan = float("nan")
     if init_T_scanner_object is not None:
         T_prior = init_T_scanner_object if isinstance(init_T_scanner_object, RigidTransform) else \
             RigidTransform(init_T_scanner_object)
         fine = _refine(cluster, model, cfg, T_prior.inverse().matrix)
-        coarse_ok, coarse_fitness = True, float("nan")
-        t2 = t3 = time.perf_counter()
-    elif cfg.coarse_method == "ransac":
+        t2 = time.perf_counter()
+        return _Alignment(fine, True, nan, nan, nan, {}, None, t2, t2)
+    if cfg.coarse_method == "ransac":
         coarse, n_voxels, t2, _ = _coarse_ransac(cluster, vp, model, cfg, seed)
         fine = _refine(cluster, model, cfg, coarse.T_target_source.matrix)
-        coarse_ok, coarse_fitness = coarse.converged, coarse.fitness
         extras = {"coarse": coarse.to_dict(), "n_voxels": n_voxels}
-        t3 = time.perf_counter()
-    else:
-        upright = None
-        if up_scanner is not None or up_object is not None:
-            if up_scanner is None or up_object is None:
-                raise InputError(f"{_CALLER} needs both 'up_scanner' and 'up_object' (or neither). "
-                                 f"Got up_scanner={up_scanner!r}, up_object={up_object!r}.")
-            upright = upright_rotations(up_scanner, up_object, caller=_CALLER)
-        fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright)
-        coarse_ok, coarse_fitness = True, extras["coarse_fitness"]
-        t3 = time.perf_counter()
-    T_os = fine.T_target_source.matrix  # T_object_scanner
-    alternatives = extras.pop("_alternatives", ())
-    cov, sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference, nearest,
-                              alternatives=alternatives)
-    T_so_can = cov[1]
-    cov = cov[0]
+        return _Alignment(fine, coarse.converged, coarse.fitness, nan, nan, extras, None, t2, time.perf_counter())
+    upright = None
+    if up_scanner is not None or up_object is not None:
+        if up_scanner is None or up_object is None:
+            raise InputError(f"{_CALLER} needs both 'up_scanner' and 'up_object' (or neither). "
+                             f"Got up_scanner={up_scanner!r}, up_object={up_object!r}.")
+        upright = upright_rotations(up_scanner, up_object, caller=_CALLER)
+    fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright)
+    return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
+
+
+def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, a: _Alignment,
+                 canonical_reference: Any, t0: float, t1: float) -> PoseEstimate:
+    """The PoseEstimate of an alignment: canonical pose, covariance (widened when untrusted) and verdict."""
+    T_os = a.fine.T_target_source.matrix  # T_object_scanner
+    alternatives = a.extras.pop("_alternatives", ())
+    (cov, T_so_can), sigma2 = _covariance(cluster, model, cfg, sym, T_os, canonical_reference, a.nearest,
+                                          alternatives=alternatives)
     t4 = time.perf_counter()
-    reliable, ambiguous = pose_verdict(coarse_ok, fine.fitness, fine.inlier_rmse_m, vis, margin, cfg)
+    fine, vis, margin = a.fine, a.visibility, a.margin
+    reliable, ambiguous = pose_verdict(a.coarse_ok, fine.fitness, fine.inlier_rmse_m, vis, margin, cfg)
     aligned = bool(fine.fitness >= cfg.min_fitness and fine.inlier_rmse_m <= cfg.max_rmse_m
                    and not (np.isfinite(vis) and vis > cfg.max_visibility))
     cov = widen_untrusted(cov, aligned=aligned, ambiguous=ambiguous, radius_m=model.radius_m)
     return PoseEstimate(
         T_scanner_object=RigidTransform(T_so_can), covariance_6x6=cov, fitness=fine.fitness,
-        rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=coarse_fitness,
+        rmse_m=fine.inlier_rmse_m, reliable=reliable, n_points=len(cluster), coarse_fitness=a.coarse_fitness,
         icp_converged=fine.converged, residual_sigma_m=float(np.sqrt(sigma2)), visibility=vis, score_margin=margin,
         ambiguous=ambiguous,
-        timings_ms={"coarse": 1e3 * (t2 - t1), "icp": 1e3 * (t3 - t2), "covariance": 1e3 * (t4 - t3),
+        timings_ms={"coarse": 1e3 * (a.t2 - t1), "icp": 1e3 * (a.t3 - a.t2), "covariance": 1e3 * (t4 - a.t3),
                     "total": 1e3 * (t4 - t0)},
-        extras=extras,
+        extras=a.extras,
     )
-
-
-def _refine(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray) -> RegistrationResult:
-    """Wide then fine ICP of the cluster onto the model from ``T_init`` (``T_object_scanner``)."""
-    init = T_init
-    if cfg.icp_wide_correspondence_m > 0:
-        init = align_icp(cluster, model.icp_target, init_T=init, max_correspondence_m=cfg.icp_wide_correspondence_m,
-                         max_iterations=cfg.icp_max_iterations).T_target_source
-    return align_icp(cluster, model.icp_target, init_T=init, max_correspondence_m=cfg.icp_max_correspondence_m,
-                     max_iterations=cfg.icp_max_iterations)
-
-
-def _icp_small_gicp(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray,
-                    max_corr: float) -> RegistrationResult:
-    return align_icp(src, model.icp_target, init_T=T_init, max_correspondence_m=max_corr,
-                     max_iterations=cfg.icp_max_iterations)
-
-
-def _small_gicp_T(source: Any, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray, max_corr: float) -> np.ndarray:
-    """``T_object_scanner`` after :func:`.icp.align_icp`'s small_gicp call on a prepared source cloud."""
-    tgt = model.icp_target
-    res = small_gicp.align(tgt.sg_cloud, source, tgt.sg_tree, init_T_target_source=np.array(T_init, dtype=np.float64),
-                           registration_type=ICP_METHODS[tgt.method], max_correspondence_distance=float(max_corr),
-                           num_threads=1, max_iterations=int(cfg.icp_max_iterations), rotation_epsilon=1e-4,
-                           translation_epsilon=1e-5)
-    T = np.array(res.T_target_source)
-    orthonormalize_transform(T)
-    return T
-
-
-def _icp_field_run(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray, max_corr: float):
-    f = model.distance_field
-    return icp_plane_field(np.ascontiguousarray(src, dtype=np.float64), np.array(T_init, dtype=np.float64), f.params,
-                           f.index, model.icp_target.points_xyz_m, model.normals_object, float(max_corr),
-                           int(cfg.icp_max_iterations), 1e-4, 1e-5)
-
-
-def _icp_field_nearest(src: np.ndarray, model: PoseModel, cfg: PoseConfig, T_init: np.ndarray, max_corr: float):
-    """Point-to-plane ICP on the distance field's nearest points (numba) as a RegistrationResult, and the
-    exact nearest model points of the aligned source (``(p, d, j)``: aligned points (N, 3), distances (N,)
-    inf beyond ``max_corr``, rows of ``icp_target``), which the covariance reuses. Fitness and RMSE are
-    :func:`.result.inlier_statistics`'s (the radius grid returns the KD-tree's distances)."""
-    t0 = time.perf_counter()
-    T, n_it, converged, _ = _icp_field_run(src, model, cfg, T_init, max_corr)
-    t1 = time.perf_counter()
-    orthonormalize_transform(T)
-    p = src @ T[:3, :3].T + T[:3, 3]
-    d, j = _nearest(model, p, max_corr)
-    fitness, rmse, n_in = _inlier_statistics_of_distances(d, max_corr)
-    res = RegistrationResult(
-        T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=n_it,
-        converged=converged, n_inliers=n_in, max_correspondence_m=max_corr, method="plane_icp",
-        timings_ms={"icp": 1e3 * (t1 - t0), "total": 1e3 * (time.perf_counter() - t0)}, extras={})
-    return res, (p, d, j)
-
-
-def _final_score(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,
-                 ) -> tuple[float, float]:
-    """Fit and visibility costs of a refined hypothesis (exact nearest model points)."""
-    p = cluster @ T_os[:3, :3].T + T_os[:3, 3]
-    d = _nearest(model, p, cfg.fit_tau_m)[0]
-    fit = float(np.mean(np.minimum(d, cfg.fit_tau_m) ** 2)) / cfg.fit_tau_m ** 2
-    vis = float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
-                                      model.visibility_normals, cfg.visibility_tol_m)[0])
-    return fit, vis
-
-
-def back_facing_shares(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, Ts: list) -> np.ndarray:
-    """Per ``T_object_scanner`` of ``Ts``: the share of cluster points whose nearest outward model normal faces
-    away from the sensor (0 for a front view, ~1 for the object seen turned around)."""
-    if model.visibility_points is None or not len(model.visibility_points) or not Ts:
-        return np.zeros(len(Ts))
-    tree = model.visibility_tree
-    out = np.empty(len(Ts))
-    for k, T in enumerate(Ts):
-        p = cluster @ T[:3, :3].T + T[:3, 3]
-        j = tree.query(p)[1]
-        out[k] = float(np.mean(np.einsum("ij,ij->i", model.visibility_normals[j], T[:3, :3] @ vp + T[:3, 3] - p) < 0))
-    return out
-
-
-def _final_scores(cluster: np.ndarray, image: RangeImage, model: PoseModel, cfg: PoseConfig,
-                  Ts: list) -> list[tuple[float, float]]:
-    """:func:`_final_score` of each of ``Ts`` (the same numbers), with one nearest-point and one visibility call."""
-    if not Ts:
-        return []
-    n = len(cluster)
-    p = np.vstack([cluster @ T[:3, :3].T + T[:3, 3] for T in Ts])
-    d = _nearest(model, p, cfg.fit_tau_m)[0]
-    tau = cfg.fit_tau_m
-    Rs = np.stack([T[:3, :3] for T in Ts])
-    ts = np.stack([T[:3, 3] for T in Ts])
-    vis = image.visibility_cost(Rs, ts, model.visibility_points, model.visibility_normals, cfg.visibility_tol_m)
-    return [(float(np.mean(np.minimum(d[k * n:(k + 1) * n], tau) ** 2)) / tau ** 2, float(vis[k]))
-            for k in range(len(Ts))]
 
 
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None):

@@ -1,4 +1,4 @@
-"""Object models for :func:`.pose.estimate_object_pose`: the settings (:class:`PoseConfig`) and the per-class
+"""Object models for :func:`.estimate.estimate_object_pose`: the settings (:class:`PoseConfig`) and the per-class
 preparation (:func:`prepare_pose_model`: distance field, visibility samples, SO(3) grid and translation starts
 for the grid search, or voxelised points + FPFH for the papers' RANSAC; the ICP target with normals).
 
@@ -76,7 +76,7 @@ class PoseConfig:
     #: 13-class catalogue's gate valve (RMS radius 11.7 cm; the handwheel 14 cm from its centre) an orientation
     #: near the truth is among the search's best three by score in every union measured, but it is 10-13 degrees
     #: off and its ICP ends at fitness 0.84-0.90 where the true pose fits at 0.99 (issue #15;
-    #: ``tests/test_pose_local_refine.py``). The built-in fittings (RMS radius <= 5.2 cm) are below the radius
+    #: ``tests/pose/test_pose_local_refine.py``). The built-in fittings (RMS radius <= 5.2 cm) are below the radius
     #: and unchanged.
     local_refine_steps_deg: tuple = (8.0, 4.0, 2.0)
     local_refine_min_radius_m: float = 0.09

@@ -147,37 +147,19 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     sub = np.ascontiguousarray(points[np.linspace(0, len(points) - 1, min(len(points), n_coarse_points)).astype(int)])
     coarse_truncations = np.asarray(truncations_m[:-2], dtype=np.float64)
 
-    def aligned_starts(R, src, truncations):
-        """The fit (H,) and translation (H, 3) of the best start of each orientation after translation steps."""
-        flat = R.reshape(-1, 3)  # (R.reshape(-1, 3) @ v).reshape(-1, 3): the bits of R @ v, faster
-        towards = (flat @ view).reshape(-1, 3)  # the direction to the scanner, object frame
-        radius = 0.5 * object_radius_m * towards
-        rc = (flat @ c).reshape(-1, 3)
-        best_t = np.ascontiguousarray(radius - rc)
-        best_fit = K.align_and_score(R, best_t, src, field.params, field.cell_m, field.offsets, truncations,
-                                     float(tau_m))
-        for anchor in view_centroids.lookup(towards) if view_centroids is not None else ():
-            far = np.flatnonzero(np.linalg.norm(anchor - radius, axis=1) > start_separation_m)  # NaN: False
-            if not len(far):
-                continue
-            Rf, t = np.ascontiguousarray(R[far]), np.ascontiguousarray(anchor[far] - rc[far])
-            fit = K.align_and_score(Rf, t, src, field.params, field.cell_m, field.offsets, truncations, float(tau_m))
-            better = fit < best_fit[far]
-            best_fit[far[better]], best_t[far[better]] = fit[better], t[better]
-        return best_fit, best_t
-
+    starts = _TranslationStarts(field, view, c, object_radius_m, view_centroids, start_separation_m,
+                                float(tau_m))
     Rs = np.ascontiguousarray(rotations, dtype=np.float64)
     if hierarchy is not None and n_coarse_keep < len(hierarchy.coarse):
         Rc = np.ascontiguousarray(hierarchy.coarse, dtype=np.float64)
-        fitc = aligned_starts(Rc, sub, coarse_truncations)[0]
+        fitc = starts.best_aligned(Rc, sub, coarse_truncations)[0]
         Rs = np.ascontiguousarray(Rs[hierarchy.children_of(np.argsort(fitc, kind="stable")[:n_coarse_keep])])
     # coarse to fine: every orientation with a few points, then the best n_candidates with all of them
-    fit0, ts = aligned_starts(Rs, sub, coarse_truncations)
+    fit0, ts = starts.best_aligned(Rs, sub, coarse_truncations)
     cand = np.argsort(fit0, kind="stable")[:n_candidates]
     Rs, ts = np.ascontiguousarray(Rs[cand]), np.ascontiguousarray(ts[cand])
     fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets,
                             np.asarray(truncations_m[-2:], dtype=np.float64), float(tau_m))
-    cand = np.arange(len(Rs))
     # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
     cand = np.argsort(fit, kind="stable")[:n_candidates]
     image = RangeImage.build(points, viewpoint, cell_m=image_cell_m)
@@ -199,6 +181,42 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
         if h is not h0:  # both go to the ICP: a better search score is not always a better ICP start
             out.append(h)
     return out, image
+
+
+@dataclass(frozen=True, eq=False)
+class _TranslationStarts:
+    """The translation starts of an orientation in :func:`search_hypotheses`: the cluster's ``centroid`` mapped
+    ``object_radius_m / 2`` from the object's origin towards the scanner (``view``: the unit direction from the
+    centroid to the scanner, scanner frame) and, given ``view_centroids``, the centroids of the model surface seen
+    from the scanner where these are more than ``start_separation_m`` from the first."""
+
+    field: DistanceField
+    view: np.ndarray
+    centroid: np.ndarray
+    object_radius_m: float
+    view_centroids: "ViewCentroids | None"
+    start_separation_m: float
+    tau_m: float
+
+    def best_aligned(self, R: np.ndarray, src: np.ndarray, truncations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The fit (H,) and translation (H, 3) of the best start of each orientation after translation steps."""
+        field = self.field
+        flat = R.reshape(-1, 3)  # (R.reshape(-1, 3) @ v).reshape(-1, 3): the bits of R @ v, faster
+        towards = (flat @ self.view).reshape(-1, 3)  # the direction to the scanner, object frame
+        radius = 0.5 * self.object_radius_m * towards
+        rc = (flat @ self.centroid).reshape(-1, 3)
+        best_t = np.ascontiguousarray(radius - rc)
+        best_fit = K.align_and_score(R, best_t, src, field.params, field.cell_m, field.offsets, truncations,
+                                     self.tau_m)
+        for anchor in self.view_centroids.lookup(towards) if self.view_centroids is not None else ():
+            far = np.flatnonzero(np.linalg.norm(anchor - radius, axis=1) > self.start_separation_m)  # NaN: False
+            if not len(far):
+                continue
+            Rf, t = np.ascontiguousarray(R[far]), np.ascontiguousarray(anchor[far] - rc[far])
+            fit = K.align_and_score(Rf, t, src, field.params, field.cell_m, field.offsets, truncations, self.tau_m)
+            better = fit < best_fit[far]
+            best_fit[far[better]], best_t[far[better]] = fit[better], t[better]
+        return best_fit, best_t
 
 
 @functools.lru_cache(maxsize=8)

@@ -86,27 +86,9 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         applied again.
     """
     caller = "build_database"
-    if normal_radius_m is None:  # from the views' own scale (issue #29, item 6): resolved with the views
-        normal_radius_m = default_normal_radius(voxel_leaf_m)
-        given_radius = None if _is_auto(normal_radius_m) else normal_radius_m
-    else:
-        given_radius = normal_radius_m
-    if not _is_auto(normal_radius_m):  # lengths checked before the views; "auto" is measured once they are
-        _check_length("normal_radius_m", normal_radius_m, caller)
-    if not (_is_auto(voxel_leaf_m) or voxel_leaf_m is None):
-        _check_length("voxel_leaf_m", voxel_leaf_m, caller)
-    n_samples = check_int("esf_n_samples", esf_n_samples, caller=caller, minimum=1)
-    rng = as_rng(seed, caller=caller)
-    views = list(views)
-    if not views:
-        raise InputError(f"The 'views' argument of {caller} must hold at least one view. Got an empty sequence.")
-    class_infos = _class_infos(classes, caller)
-    views = _check_view_items(views, class_infos, caller, "views", "view")
-    seen = {(label, view_id) for label, view_id, _ in views}
-    unused = set(class_infos) - {lab for lab, _ in seen}
-    if unused:
-        raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
-    models = _check_model_views(model_views, class_infos, caller)
+    normal_radius_m, given_radius, n_samples, rng = _checked_settings(normal_radius_m, voxel_leaf_m, esf_n_samples,
+                                                                      seed, caller)
+    views, class_infos, models = _checked_views(views, classes, model_views, caller)
     prep = _as_preprocessing(preprocessing, caller).with_view_spacing(None)  # the spacing is measured below
     if not (views_preprocessed or prep.is_identity):
         views = [(label, view_id, _preprocess_view(prep, label, view_id, cloud)) for label, view_id, cloud in views]
@@ -122,7 +104,45 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
     items = [(label, view_id, cloud, int(view_seeds[k])) for k, (label, view_id, cloud) in enumerate(views)]
     for k, d in enumerate((mapper or _map_here)(task, items, progress)):
         esf[k], vfh[k] = d.esf, d.vfh
-    counts = np.array([v[2].n_points for v in views], dtype=np.int64)
+    params = _database_params(variant, radius, n_samples, leaf, seed, prep, views, lengths, normal_radius_m,
+                              voxel_leaf_m)
+    return _assemble(views, models, esf, vfh, class_infos, params)
+
+
+def _checked_settings(normal_radius_m, voxel_leaf_m, esf_n_samples, seed, caller: str):
+    """``(normal_radius_m, the radius given or None, esf_n_samples, rng)`` of :func:`build_database`, checked."""
+    if normal_radius_m is None:  # from the views' own scale (issue #29, item 6): resolved with the views
+        normal_radius_m = default_normal_radius(voxel_leaf_m)
+        given_radius = None if _is_auto(normal_radius_m) else normal_radius_m
+    else:
+        given_radius = normal_radius_m
+    if not _is_auto(normal_radius_m):  # lengths checked before the views; "auto" is measured once they are
+        _check_length("normal_radius_m", normal_radius_m, caller)
+    if not (_is_auto(voxel_leaf_m) or voxel_leaf_m is None):
+        _check_length("voxel_leaf_m", voxel_leaf_m, caller)
+    n_samples = check_int("esf_n_samples", esf_n_samples, caller=caller, minimum=1)
+    rng = as_rng(seed, caller=caller)
+    return normal_radius_m, given_radius, n_samples, rng
+
+
+def _checked_views(views, classes, model_views, caller: str):
+    """``(views, class_infos, model views)`` of :func:`build_database`, checked against each other."""
+    views = list(views)
+    if not views:
+        raise InputError(f"The 'views' argument of {caller} must hold at least one view. Got an empty sequence.")
+    class_infos = _class_infos(classes, caller)
+    views = _check_view_items(views, class_infos, caller, "views", "view")
+    seen = {(label, view_id) for label, view_id, _ in views}
+    unused = set(class_infos) - {lab for lab, _ in seen}
+    if unused:
+        raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
+    models = _check_model_views(model_views, class_infos, caller)
+    return views, class_infos, models
+
+
+def _database_params(variant, radius, n_samples, leaf, seed, prep, views, lengths, normal_radius_m,
+                     voxel_leaf_m) -> dict:
+    """The database's ``params``: how its descriptors were computed, so queries are described the same way."""
     params = {"vfh_variant": variant, "normal_radius_m": radius, "esf_n_samples": n_samples, "voxel_leaf_m": leaf,
               "seed": seed if isinstance(seed, int) else None,
               "preprocessing": prep.with_view_spacing(_views_spacing_m([v[2] for v in views], leaf)).to_dict()}
@@ -134,6 +154,12 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         params["auto_rule"] = lengths["auto_rule"]
         if "extent_m" in lengths:
             params["extent_m"] = lengths["extent_m"]
+    return params
+
+
+def _assemble(views, models, esf, vfh, class_infos, params) -> ViewDatabase:
+    """The views' points, viewpoints and descriptors, and the pose-model views, in one :class:`ViewDatabase`."""
+    counts = np.array([v[2].n_points for v in views], dtype=np.int64)
     return ViewDatabase(
         labels=np.array([str(v[0]) for v in views]),
         view_ids=np.array([str(v[1]) for v in views]),

@@ -9,6 +9,7 @@ import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -264,29 +265,10 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
     radius, leaf = lengths["normal_radius_m"], lengths["voxel_leaf_m"]
     scale = lengths["vfh_scale"] if vfh_scale is None else check_positive("vfh_scale", vfh_scale,
                                                                            caller="compute_view_descriptors")
-    pts = cloud.points_xyz_m
-    if leaf is not None:
-        from ..segmentation.voxel import voxel_downsample
-
-        pts = voxel_downsample(pts, leaf)
-        if len(pts) < 3:
-            raise DatabaseError(f"The cloud has {len(pts)} point(s) left after the {leaf} m voxel grid: "
-                                f"ESF and VFH need at least 3. Use a smaller 'voxel_leaf_m'.")
+    pts = _grid_points(cloud.points_xyz_m, leaf)
     kwargs = {} if vfh_variant is None else {"variant": vfh_variant}
 
-    def normals_and_vfh() -> np.ndarray:
-        normals = descriptors.estimate_normals(pts, radius_m=radius, viewpoint_xyz_m=cloud.viewpoint_xyz_m).normals_xyz
-        ok = np.isfinite(normals).all(axis=1)
-        if np.count_nonzero(ok) < 2:
-            from ..errors import DescriptorError
-
-            raise DescriptorError(f"Only {np.count_nonzero(ok)} of the {len(pts)} points have a normal within "
-                                  f"normal_radius_m={radius:g} (3 neighbours needed): the radius is too small for "
-                                  f"the points' spacing (are they in metres?). Use normal_radius_m='auto'.")
-        if scale == 1.0:
-            return descriptors.compute_vfh(pts[ok], normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m, **kwargs)
-        return descriptors.compute_vfh(pts[ok] * scale, normals[ok], viewpoint_xyz_m=cloud.viewpoint_xyz_m * scale,
-                                       **kwargs)
+    normals_and_vfh = partial(_normals_and_vfh, pts, cloud.viewpoint_xyz_m, radius, scale, kwargs)
 
     if not concurrent:
         esf = descriptors.compute_esf(pts, n_samples=int(esf_n_samples), seed=seed)
@@ -308,6 +290,37 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
                             f"Got {esf.shape} and {vfh.shape} instead.")
     return ViewDescriptors(esf, vfh)
 
+
+
+def _grid_points(pts: np.ndarray, leaf: float | None) -> np.ndarray:
+    """The points on the ``leaf`` voxel grid (their centroids), or as they are without a grid."""
+    if leaf is not None:
+        from ..segmentation.voxel import voxel_downsample
+
+        pts = voxel_downsample(pts, leaf)
+        if len(pts) < 3:
+            raise DatabaseError(f"The cloud has {len(pts)} point(s) left after the {leaf} m voxel grid: "
+                                f"ESF and VFH need at least 3. Use a smaller 'voxel_leaf_m'.")
+    return pts
+
+
+def _normals_and_vfh(pts: np.ndarray, viewpoint_xyz_m: np.ndarray, radius: float, scale: float,
+                     kwargs: dict) -> np.ndarray:
+    """Normals within ``radius`` (flipped towards the viewpoint) and the VFH of the points that have one."""
+    from .. import descriptors
+
+    normals = descriptors.estimate_normals(pts, radius_m=radius, viewpoint_xyz_m=viewpoint_xyz_m).normals_xyz
+    ok = np.isfinite(normals).all(axis=1)
+    if np.count_nonzero(ok) < 2:
+        from ..errors import DescriptorError
+
+        raise DescriptorError(f"Only {np.count_nonzero(ok)} of the {len(pts)} points have a normal within "
+                              f"normal_radius_m={radius:g} (3 neighbours needed): the radius is too small for "
+                              f"the points' spacing (are they in metres?). Use normal_radius_m='auto'.")
+    if scale == 1.0:
+        return descriptors.compute_vfh(pts[ok], normals[ok], viewpoint_xyz_m=viewpoint_xyz_m, **kwargs)
+    return descriptors.compute_vfh(pts[ok] * scale, normals[ok], viewpoint_xyz_m=viewpoint_xyz_m * scale,
+                                   **kwargs)
 
 
 _HELPER: tuple[int, ThreadPoolExecutor] | None = None

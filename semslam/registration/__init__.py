@@ -1,6 +1,8 @@
-"""Pairwise registration of two clouds: prerejective RANSAC on FPFH (coarse), ICP with small_gicp (fine), the
-upright 4-DoF alignment, and the ambiguity of a result. The 6-DoF pose of a recognised object against its model
-(search, ICP, covariance, symmetries) is :mod:`semslam.pose`.
+"""Pairwise registration of two clouds (``T_target_source``): :func:`register`, PCL's pipeline (voxel grid,
+FPFH, prerejective RANSAC :func:`align_prerejective` for the coarse step, ICP :func:`align_icp` for the fine one),
+the gravity-aligned 4-DoF :func:`align_upright` when both clouds know where up is, and the ambiguity of a result
+(:mod:`~semslam.registration.ambiguity`). The 6-DoF pose of a recognised object against its model (grid search,
+ICP, covariance, symmetries) is :mod:`semslam.pose`.
 
 >>> result = register(source_cloud, target_cloud, RegisterConfig(voxel_m=0.005))   # doctest: +SKIP
 >>> result.T_target_source, result.fitness, result.inlier_rmse_m                  # doctest: +SKIP

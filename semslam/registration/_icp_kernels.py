@@ -111,6 +111,39 @@ def _plane_error(src, T, model_pts, model_nrm, pair):
 
 
 @njit(cache=True)
+def _plane_normal_equations(src, T, model_pts, model_nrm, pair, H, g, J):
+    """The Gauss-Newton system of the point-to-plane error of the pairs ``pair`` under ``T`` (right perturbation
+    ``(phi, rho)``, see :func:`icp_plane_field`): ``H`` (6, 6) = sum J^T J and ``g`` (6,) = sum J^T r written in
+    place (``J`` (6,) is scratch); returns the error ``sum 0.5 r^2``."""
+    H[:] = 0.0
+    g[:] = 0.0
+    e = 0.0
+    for i in range(src.shape[0]):
+        m = pair[i]
+        if m < 0:
+            continue
+        x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
+        for a in range(3):  # one row per axis: e_a = n_a (q_a - (T s)_a)
+            na = model_nrm[m, a]
+            p = T[a, 0] * x0 + T[a, 1] * x1 + T[a, 2] * x2 + T[a, 3]
+            r = na * (model_pts[m, a] - p)
+            # d e_a / d phi = n_a (R [s]x)_a ; d e_a / d rho = -n_a R_a
+            J[0] = na * (T[a, 1] * x2 - T[a, 2] * x1)
+            J[1] = na * (T[a, 2] * x0 - T[a, 0] * x2)
+            J[2] = na * (T[a, 0] * x1 - T[a, 1] * x0)
+            J[3], J[4], J[5] = -na * T[a, 0], -na * T[a, 1], -na * T[a, 2]
+            for u in range(6):
+                g[u] += J[u] * r
+                for v in range(u, 6):
+                    H[u, v] += J[u] * J[v]
+            e += 0.5 * r * r
+    for u in range(6):
+        for v in range(u):
+            H[u, v] = H[v, u]
+    return e
+
+
+@njit(cache=True)
 def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_iterations, rot_eps, trans_eps):
     """Point-to-plane ICP with correspondences from a precomputed nearest-point grid.
 
@@ -148,31 +181,7 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
     T_new = np.empty((4, 4))
     for it in range(max_iterations):
         n_pairs = _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair)
-        H[:] = 0.0
-        g[:] = 0.0
-        e = 0.0
-        for i in range(N):
-            m = pair[i]
-            if m < 0:
-                continue
-            x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
-            for a in range(3):  # one row per axis: e_a = n_a (q_a - (T s)_a)
-                na = model_nrm[m, a]
-                p = T[a, 0] * x0 + T[a, 1] * x1 + T[a, 2] * x2 + T[a, 3]
-                r = na * (model_pts[m, a] - p)
-                # d e_a / d phi = n_a (R [s]x)_a ; d e_a / d rho = -n_a R_a
-                J[0] = na * (T[a, 1] * x2 - T[a, 2] * x1)
-                J[1] = na * (T[a, 2] * x0 - T[a, 0] * x2)
-                J[2] = na * (T[a, 0] * x1 - T[a, 1] * x0)
-                J[3], J[4], J[5] = -na * T[a, 0], -na * T[a, 1], -na * T[a, 2]
-                for u in range(6):
-                    g[u] += J[u] * r
-                    for v in range(u, 6):
-                        H[u, v] += J[u] * J[v]
-                e += 0.5 * r * r
-        for u in range(6):
-            for v in range(u):
-                H[u, v] = H[v, u]
+        e = _plane_normal_equations(src, T, model_pts, model_nrm, pair, H, g, J)
         success = False
         for _ in range(10):
             A[:] = H

@@ -11,6 +11,7 @@ Hypotheses are drawn, pre-rejected, estimated and scored in numpy batches.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,26 +29,12 @@ _DEADLINE_CHUNK_POINTS = 1 << 16
 
 
 def align_prerejective(
-    source_points: Any,
-    source_features: Any,
-    target_points: Any,
-    target_features: Any,
-    *,
-    max_iterations: int = 5000,
-    n_samples: int = 3,
-    k_correspondences: int = 2,
-    similarity: float = 0.6,
-    max_correspondence_m: float = float("inf"),
-    inlier_fraction: float = 0.0,
-    seed: int | np.random.Generator | None = 0,
-    init_T: Any = None,
-    stop_fraction: float | None = None,
-    batch_size: int = 2048,
-    target_tree: cKDTree | None = None,
-    target_feature_tree: cKDTree | None = None,
-    selection: str = "error",
-    deadline: float | None = None,
-    on_batch: Any = None,
+    source_points: Any, source_features: Any, target_points: Any, target_features: Any, *,
+    max_iterations: int = 5000, n_samples: int = 3, k_correspondences: int = 2, similarity: float = 0.6,
+    max_correspondence_m: float = float("inf"), inlier_fraction: float = 0.0,
+    seed: int | np.random.Generator | None = 0, init_T: Any = None, stop_fraction: float | None = None,
+    batch_size: int = 2048, target_tree: cKDTree | None = None, target_feature_tree: cKDTree | None = None,
+    selection: str = "error", deadline: float | None = None, on_batch: Any = None,
 ) -> RegistrationResult:
     """Align ``source_points`` onto ``target_points`` from precomputed point features.
 
@@ -58,18 +45,15 @@ def align_prerejective(
     source_features, target_features : array-like of shape (N, D) and (M, D)
         One feature vector per point (FPFH: D = 33). Rows with NaN (points without a normal) are never
         sampled or matched, but their points still count when scoring.
-    max_iterations : int
-        Number of hypotheses drawn (PCL default 5000; its tutorial uses 50000).
-    n_samples : int
-        Points per hypothesis (>= 3).
+    max_iterations, n_samples : int
+        Hypotheses drawn (PCL default 5000; its tutorial uses 50000) and points per hypothesis (>= 3).
     k_correspondences : int
         Each sampled source point is matched to one of its ``k`` nearest target features, at random.
     similarity : float
         Polygon pre-rejection threshold in (0, 1]: every edge-length ratio must be >= ``similarity``.
-    max_correspondence_m : float
-        A transformed source point is an inlier when its nearest target point is closer than this.
-    inlier_fraction : float
-        Smallest inlier fraction, in [0, 1], for a hypothesis to be accepted.
+    max_correspondence_m, inlier_fraction : float
+        A transformed source point is an inlier when its nearest target point is closer than
+        ``max_correspondence_m``; a hypothesis is accepted when its inlier fraction reaches ``inlier_fraction``.
     seed : int or numpy Generator
         Makes the result reproducible.
     init_T : None, array-like (4, 4), RigidTransform or ``"centroid"``
@@ -81,15 +65,14 @@ def align_prerejective(
         ``None`` runs all ``max_iterations``).
     batch_size : int
         Hypotheses processed per numpy batch (memory ~ batch * N * 24 bytes for the survivors).
-    target_tree : scipy.spatial.cKDTree, optional
-        A cached KD-tree of ``target_points`` (reused across calls on the same target).
-    target_feature_tree : scipy.spatial.cKDTree, optional
-        A cached KD-tree of ``target_features`` (all rows must then be finite).
+    target_tree, target_feature_tree : scipy.spatial.cKDTree, optional
+        Cached KD-trees of ``target_points`` and ``target_features`` (reused across calls on the same
+        target; the target features must then all be finite).
     selection : {"error", "msac"}
-        ``"error"`` (PCL): among hypotheses reaching ``inlier_fraction``, the smallest mean squared inlier
-        distance wins. ``"msac"``: the smallest truncated cost ``mean(min(d^2, max_correspondence_m^2))``
-        over all source points wins, which rewards more inliers (better on small, self-similar objects;
-        needs a finite ``max_correspondence_m``).
+        ``"error"`` (PCL): among hypotheses reaching ``inlier_fraction``, the smallest mean squared inlier distance
+        wins. ``"msac"``: the smallest truncated cost ``mean(min(d^2, max_correspondence_m^2))`` over all source
+        points wins, which rewards more inliers (better on small, self-similar objects; needs a finite
+        ``max_correspondence_m``).
     deadline : float, optional
         A ``time.perf_counter()`` instant: no new batch of hypotheses is started after it (the time
         budget of :func:`~semslam.registration.register`); ``extras["budget_exhausted"]`` then says so.
@@ -113,10 +96,63 @@ def align_prerejective(
         When fewer than ``n_samples`` points have finite features.
     """
     t0 = time.perf_counter()
+    src, fs, tgt, ft = _checked_clouds(source_points, source_features, target_points, target_features)
+    settings = _checked_settings(max_iterations, n_samples, k_correspondences, similarity, max_correspondence_m,
+                                 inlier_fraction, stop_fraction, batch_size, selection, deadline)
+    rng = as_rng(seed, caller=_CALLER)
+    src_ok, tgt_ok = _rows_with_finite_features(fs, ft, settings.n_samples)
+    T_init = _initial_guess(init_T, src, tgt)
+    tree = target_tree if target_tree is not None else cKDTree(tgt)
+    t1 = time.perf_counter()
+    nn, k = _feature_neighbours(fs, ft, src_ok, tgt_ok, settings.k_correspondences, target_feature_tree)
+    t2 = time.perf_counter()
+    search = _run_hypotheses(src, tgt, tree, src_ok, nn, k, T_init, settings, rng, on_batch)
+    return _coarse_result(src, tree, search, T_init, settings.max_corr, (t0, t1, t2, time.perf_counter()))
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """The checked scalar arguments of :func:`align_prerejective`."""
+
+    max_iterations: int
+    n_samples: int
+    k_correspondences: int
+    similarity: float
+    max_corr: float
+    inlier_fraction: float
+    stop_fraction: float | None
+    batch_size: int
+    selection: str
+    deadline: float | None
+
+
+@dataclass
+class _Search:
+    """The running state of the hypothesis loop: the best accepted hypothesis and the counters."""
+
+    best_T: np.ndarray | None = None
+    best_err: float = np.inf
+    best_frac: float = 0.0
+    n_drawn: int = 0
+    n_rejected: int = 0
+    n_scored: int = 0
+    exhausted: bool = False
+
+
+def _checked_clouds(source_points: Any, source_features: Any, target_points: Any, target_features: Any,
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The points and features as float arrays of matching shapes (features may hold NaN)."""
     src = as_float_array("source_points", source_points, (None, 3), caller=_CALLER)
     tgt = as_float_array("target_points", target_points, (None, 3), caller=_CALLER)
     fs = as_float_array("source_features", source_features, (len(src), None), caller=_CALLER, finite=False)
     ft = as_float_array("target_features", target_features, (len(tgt), fs.shape[1]), caller=_CALLER, finite=False)
+    return src, fs, tgt, ft
+
+
+def _checked_settings(max_iterations: Any, n_samples: Any, k_correspondences: Any, similarity: Any,
+                      max_correspondence_m: Any, inlier_fraction: Any, stop_fraction: Any, batch_size: Any,
+                      selection: str, deadline: float | None) -> _Settings:
+    """The scalar arguments checked (an InputError naming the first bad one)."""
     max_iterations = check_int("max_iterations", max_iterations, caller=_CALLER, minimum=1)
     n_samples = check_int("n_samples", n_samples, caller=_CALLER, minimum=3)
     k = check_int("k_correspondences", k_correspondences, caller=_CALLER, minimum=1)
@@ -134,8 +170,12 @@ def align_prerejective(
     if selection == "msac" and not np.isfinite(max_corr):
         raise InputError(f"The 'selection' argument of {_CALLER} can be 'msac' only with a finite "
                          f"'max_correspondence_m'. Got max_correspondence_m = {max_corr} instead.")
-    rng = as_rng(seed, caller=_CALLER)
+    return _Settings(max_iterations, n_samples, k, similarity, max_corr, float(inlier_fraction), stop_fraction,
+                     batch_size, selection, deadline)
 
+
+def _rows_with_finite_features(fs: np.ndarray, ft: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of the source and target features without NaN; a RegistrationError when too few."""
     src_ok = np.flatnonzero(np.isfinite(fs).all(axis=1))
     tgt_ok = np.flatnonzero(np.isfinite(ft).all(axis=1))
     if len(src_ok) < n_samples or len(tgt_ok) < 1:
@@ -143,74 +183,100 @@ def align_prerejective(
             f"align_prerejective needs at least {n_samples} source points and 1 target point with finite features. "
             f"Got {len(src_ok)} source and {len(tgt_ok)} target points instead."
         )
+    return src_ok, tgt_ok
+
+
+def _feature_neighbours(fs: np.ndarray, ft: np.ndarray, src_ok: np.ndarray, tgt_ok: np.ndarray, k: int,
+                        target_feature_tree: cKDTree | None) -> tuple[np.ndarray, int]:
+    """Target rows (len(src_ok), k) of the k nearest target features of every usable source point (the cache
+    PCL fills lazily), and k (at most the number of usable target rows)."""
     k = min(k, len(tgt_ok))
-    T_init = _initial_guess(init_T, src, tgt)
-    tree = target_tree if target_tree is not None else cKDTree(tgt)
-    t1 = time.perf_counter()
-    # k nearest target features of every usable source point (the cache PCL fills lazily)
-    if target_feature_tree is not None and len(tgt_ok) != len(tgt):
+    if target_feature_tree is not None and len(tgt_ok) != len(ft):
         raise InputError(f"The 'target_feature_tree' argument of {_CALLER} needs finite target features. "
-                         f"Got {len(tgt) - len(tgt_ok)} non-finite row(s) instead.")
+                         f"Got {len(ft) - len(tgt_ok)} non-finite row(s) instead.")
     ftree = target_feature_tree if target_feature_tree is not None else cKDTree(ft[tgt_ok])
     _, nn = ftree.query(fs[src_ok], k=k)
-    nn = tgt_ok[nn.reshape(len(src_ok), k)]
-    t2 = time.perf_counter()
+    return tgt_ok[nn.reshape(len(src_ok), k)], k
 
+
+def _run_hypotheses(src: np.ndarray, tgt: np.ndarray, tree: cKDTree, src_ok: np.ndarray, nn: np.ndarray, k: int,
+                    T_init: np.ndarray | None, s: _Settings, rng: np.random.Generator, on_batch: Any) -> _Search:
+    """The initial guess scored, then batches of hypotheses drawn, pre-rejected, estimated and scored until
+    ``max_iterations``, the deadline or ``stop_fraction``."""
     n = len(src)
-    min_inliers = float(inlier_fraction) * n
-    best_T, best_err, best_frac = None, np.inf, 0.0
+    min_inliers = s.inlier_fraction * n
+    state = _Search()
     if T_init is not None:
-        frac, err = _score(src, tree, T_init[None], max_corr, selection)
+        frac, err = _score(src, tree, T_init[None], s.max_corr, s.selection)
         if frac[0] * n >= min_inliers:
-            best_T, best_err, best_frac = T_init, float(err[0]), float(frac[0])
-    n_drawn = n_rejected = n_scored = 0
-    exhausted = False
-    while n_drawn < max_iterations:
-        if deadline is not None and time.perf_counter() >= deadline:
-            exhausted = True
+            state.best_T, state.best_err, state.best_frac = T_init, float(err[0]), float(frac[0])
+    while state.n_drawn < s.max_iterations:
+        if s.deadline is not None and time.perf_counter() >= s.deadline:
+            state.exhausted = True
             break
-        if on_batch is not None and n_drawn:
-            on_batch(n_drawn)
-        b = min(batch_size, max_iterations - n_drawn)
-        n_drawn += b
-        si = src_ok[K.sample_distinct(rng, len(src_ok), b, n_samples)]  # (b, n_samples) source indices
-        pick = rng.integers(0, k, size=si.shape) if k > 1 else np.zeros(si.shape, dtype=np.int64)
-        ti = nn[np.searchsorted(src_ok, si), pick]
-        keep = K.polygon_similar(src[si], tgt[ti], similarity)
-        n_rejected += int(b - keep.sum())
-        if not keep.any():
+        if on_batch is not None and state.n_drawn:
+            on_batch(state.n_drawn)
+        b = min(s.batch_size, s.max_iterations - state.n_drawn)
+        state.n_drawn += b
+        Ts_all = _draw_hypotheses(src, tgt, src_ok, nn, k, b, s, rng, state)
+        if Ts_all is None:
             continue
-        R, t = K.umeyama_batch(src[si[keep]], tgt[ti[keep]])
-        Ts_all = K.transforms_from(R, t)
-        # scored in chunks of ~2^16 points, the deadline checked between them (same result as one chunk)
-        chunk = len(Ts_all) if deadline is None else max(1, _DEADLINE_CHUNK_POINTS // max(1, n))
-        for c in range(0, len(Ts_all), chunk):
-            if c and deadline is not None and time.perf_counter() >= deadline:
-                exhausted = True
-                break
-            Ts = Ts_all[c:c + chunk]
-            frac, err = _score(src, tree, Ts, max_corr, selection)
-            n_scored += len(Ts)
-            ok = np.flatnonzero((frac * n >= min_inliers) & (err < best_err))
-            if ok.size:
-                j = ok[np.argmin(err[ok])]
-                best_T, best_err, best_frac = Ts[j], float(err[j]), float(frac[j])
-        if exhausted:
+        _score_hypotheses(src, tree, Ts_all, min_inliers, s, state)
+        if state.exhausted:
             break
-        if stop_fraction is not None and best_T is not None and best_frac >= stop_fraction:
+        if s.stop_fraction is not None and state.best_T is not None and state.best_frac >= s.stop_fraction:
             break
-    t3 = time.perf_counter()
+    return state
 
-    converged = best_T is not None
-    T = best_T if converged else (T_init if T_init is not None else np.eye(4))
+
+def _draw_hypotheses(src: np.ndarray, tgt: np.ndarray, src_ok: np.ndarray, nn: np.ndarray, k: int, b: int,
+                     s: _Settings, rng: np.random.Generator, state: _Search) -> np.ndarray | None:
+    """``b`` samples drawn and pre-rejected (counted in ``state``); the Umeyama transforms (B, 4, 4) of the
+    survivors, None when none survived."""
+    si = src_ok[K.sample_distinct(rng, len(src_ok), b, s.n_samples)]  # (b, n_samples) source indices
+    pick = rng.integers(0, k, size=si.shape) if k > 1 else np.zeros(si.shape, dtype=np.int64)
+    ti = nn[np.searchsorted(src_ok, si), pick]
+    keep = K.polygon_similar(src[si], tgt[ti], s.similarity)
+    state.n_rejected += int(b - keep.sum())
+    if not keep.any():
+        return None
+    R, t = K.umeyama_batch(src[si[keep]], tgt[ti[keep]])
+    return K.transforms_from(R, t)
+
+
+def _score_hypotheses(src: np.ndarray, tree: cKDTree, Ts_all: np.ndarray, min_inliers: float, s: _Settings,
+                      state: _Search) -> None:
+    """Score ``Ts_all`` and keep the best accepted one in ``state``: in chunks of ~2^16 points, the deadline
+    checked between them (same result as one chunk)."""
+    n = len(src)
+    chunk = len(Ts_all) if s.deadline is None else max(1, _DEADLINE_CHUNK_POINTS // max(1, n))
+    for c in range(0, len(Ts_all), chunk):
+        if c and s.deadline is not None and time.perf_counter() >= s.deadline:
+            state.exhausted = True
+            break
+        Ts = Ts_all[c:c + chunk]
+        frac, err = _score(src, tree, Ts, s.max_corr, s.selection)
+        state.n_scored += len(Ts)
+        ok = np.flatnonzero((frac * n >= min_inliers) & (err < state.best_err))
+        if ok.size:
+            j = ok[np.argmin(err[ok])]
+            state.best_T, state.best_err, state.best_frac = Ts[j], float(err[j]), float(frac[j])
+
+
+def _coarse_result(src: np.ndarray, tree: cKDTree, state: _Search, T_init: np.ndarray | None, max_corr: float,
+                   times: tuple[float, float, float, float]) -> RegistrationResult:
+    """The RegistrationResult of the best hypothesis (the initial guess, else identity, when none was accepted)."""
+    t0, t1, t2, t3 = times
+    converged = state.best_T is not None
+    T = state.best_T if converged else (T_init if T_init is not None else np.eye(4))
     T = _orthonormalise(T)
     fitness, rmse, n_in = inlier_statistics(src @ T[:3, :3].T + T[:3, 3], tree, max_corr)
     return RegistrationResult(
-        T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=n_drawn,
+        T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=state.n_drawn,
         converged=converged, n_inliers=n_in, max_correspondence_m=max_corr, method="prerejective",
         timings_ms={"feature_matching": 1e3 * (t2 - t1), "ransac": 1e3 * (t3 - t2), "total": 1e3 * (time.perf_counter() - t0)},
-        extras={"n_prerejected": n_rejected, "n_scored": n_scored, "best_error_m2": best_err if converged else None,
-                "budget_exhausted": exhausted},
+        extras={"n_prerejected": state.n_rejected, "n_scored": state.n_scored,
+                "best_error_m2": state.best_err if converged else None, "budget_exhausted": state.exhausted},
     )
 
 

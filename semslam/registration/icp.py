@@ -70,19 +70,10 @@ def prepare_icp_target(points_xyz_m: Any, *, method: str = "plane", normals_k: i
 
 
 def align_icp(
-    source_points: Any,
-    target: Any,
-    *,
-    init_T: Any = None,
-    method: str = "plane",
-    max_correspondence_m: float = 0.01,
-    max_iterations: int = 30,
-    rotation_eps_rad: float = 1e-4,
-    translation_eps_m: float = 1e-5,
-    normals_k: int = 20,
-    transformation_epsilon: float = 1e-8,
-    euclidean_fitness_epsilon: float = -np.inf,
-    deadline: float | None = None,
+    source_points: Any, target: Any, *, init_T: Any = None, method: str = "plane",
+    max_correspondence_m: float = 0.01, max_iterations: int = 30, rotation_eps_rad: float = 1e-4,
+    translation_eps_m: float = 1e-5, normals_k: int = 20, transformation_epsilon: float = 1e-8,
+    euclidean_fitness_epsilon: float = -np.inf, deadline: float | None = None,
 ) -> RegistrationResult:
     """Refine ``T_target_source`` by ICP (small_gicp, Gauss-Newton on SE(3), one thread).
 
@@ -136,12 +127,26 @@ def align_icp(
     T0 = np.eye(4) if init_T is None else (
         init_T.matrix if isinstance(init_T, RigidTransform) else RigidTransform(init_T).matrix)
     if target.method == "pcl":
-        t1 = time.perf_counter()
-        end = np.inf if deadline is None else float(deadline)
-        T, n_it, converged = icp_pcl(src, target.tree, T0, max_corr, max_iterations, float(transformation_epsilon),
-                                     float(euclidean_fitness_epsilon), deadline=end)
-        extras = {"budget_exhausted": True} if not converged and time.perf_counter() >= end else {}
-        return _result(src, target, T, n_it, converged, max_corr, t0, t1, extras)
+        return _align_pcl(src, target, T0, max_corr, max_iterations, transformation_epsilon,
+                          euclidean_fitness_epsilon, deadline, t0)
+    return _align_small_gicp(src, target, T0, max_corr, max_iterations, rot_eps, trans_eps, normals_k, t0)
+
+
+def _align_pcl(src: np.ndarray, target: IcpTarget, T0: np.ndarray, max_corr: float, max_iterations: int,
+               transformation_epsilon: float, euclidean_fitness_epsilon: float, deadline: float | None,
+               t0: float) -> RegistrationResult:
+    """:func:`align_icp` with ``method="pcl"``: PCL's loop (:func:`._icp_kernels.icp_pcl`) until ``deadline``."""
+    t1 = time.perf_counter()
+    end = np.inf if deadline is None else float(deadline)
+    T, n_it, converged = icp_pcl(src, target.tree, T0, max_corr, max_iterations, float(transformation_epsilon),
+                                 float(euclidean_fitness_epsilon), deadline=end)
+    extras = {"budget_exhausted": True} if not converged and time.perf_counter() >= end else {}
+    return _result(src, target, T, n_it, converged, max_corr, t0, t1, extras)
+
+
+def _align_small_gicp(src: np.ndarray, target: IcpTarget, T0: np.ndarray, max_corr: float, max_iterations: int,
+                      rot_eps: float, trans_eps: float, normals_k: int, t0: float) -> RegistrationResult:
+    """:func:`align_icp` with a small_gicp method (one thread; source covariances for GICP)."""
     source = small_gicp.PointCloud(src)
     if target.method == "gicp":
         small_gicp.estimate_covariances(source, num_neighbors=normals_k)

@@ -148,27 +148,11 @@ def align_upright(source: Any, target: Any, *, up_source: Any, up_target: Any,
     R_up = rotation_between(u_s, u_t)
     c_src, c_tgt = np.median(src_t, axis=0), np.median(tgt_t, axis=0)
     yaws = np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg))
-    costs = np.empty(len(yaws))
-    src_scan = _thin(src_t, cfg.scan_points)
-    for k, yaw in enumerate(yaws):
-        R = Rotation.from_rotvec(u_t * yaw).as_matrix() @ R_up
-        t = fit_translation(src_scan, tree, tgt_t, R, c_tgt - R @ c_src, mc)
-        costs[k] = truncated_cost(src_scan, tree, R, t, mc)
+    costs = _yaw_scan_costs(yaws, _thin(src_t, cfg.scan_points), tree, tgt_t, u_t, R_up, c_src, c_tgt, mc)
     t1 = time.perf_counter()
     starts = _distinct_minima(yaws, costs, np.radians(cfg.min_separation_deg), cfg.n_hypotheses)
-    hyps = []
-    for yaw in starts:
-        R = Rotation.from_rotvec(u_t * yaw).as_matrix() @ R_up
-        t = fit_translation(src_t, tree, tgt_t, R, c_tgt - R @ c_src, mc)
-        R, t, JtJ, n_it = point_to_plane_4dof(src_t, tree, tgt_t, normals, R, t, u_t, mc, cfg.icp_iterations)
-        d = tree.query(src_t @ R.T + t)[0]
-        inl = d < mc
-        rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
-        score = float(np.sqrt(truncated_cost(src_t, tree, R, t, mc)))
-        yaw_deg = float(np.degrees(_yaw_about(u_t, R @ np.linalg.inv(R_up))))
-        facing = float(np.mean(np.einsum("ij,ij->i", src_n @ R.T, vp_t - (src_t @ R.T + t)) > 0))
-        hyps.append({"R": R, "t": t, "JtJ": JtJ, "n_it": n_it, "rms_m": score, "rmse_m": rmse, "facing": facing,
-                     "fitness": float(inl.mean()), "n_inliers": int(inl.sum()), "yaw_deg": yaw_deg})
+    hyps = [_refined_start(yaw, src_t, src_n, tree, tgt_t, normals, u_t, R_up, c_src, c_tgt, vp_t, mc,
+                           cfg.icp_iterations) for yaw in starts]
     top_facing = max(h["facing"] for h in hyps)
     hyps = [h for h in hyps if h["facing"] >= cfg.min_facing_ratio * top_facing]
     hyps.sort(key=lambda h: h["rms_m"])
@@ -198,6 +182,36 @@ def align_upright(source: Any, target: Any, *, up_source: Any, up_target: Any,
                 "hypotheses": [{"yaw_deg": h["yaw_deg"], "rms_m": h["rms_m"], "fitness": h["fitness"],
                                  "facing": h["facing"]} for h in hyps]},
     )
+
+
+def _yaw_scan_costs(yaws: np.ndarray, src_scan: np.ndarray, tree: cKDTree, tgt_t: np.ndarray, u_t: np.ndarray,
+                    R_up: np.ndarray, c_src: np.ndarray, c_tgt: np.ndarray, mc: float) -> np.ndarray:
+    """The truncated cost (len(yaws),) of the source turned up onto up then by each yaw about the target's up,
+    its translation fitted (the yaw scan of :func:`align_upright`)."""
+    costs = np.empty(len(yaws))
+    for k, yaw in enumerate(yaws):
+        R = Rotation.from_rotvec(u_t * yaw).as_matrix() @ R_up
+        t = fit_translation(src_scan, tree, tgt_t, R, c_tgt - R @ c_src, mc)
+        costs[k] = truncated_cost(src_scan, tree, R, t, mc)
+    return costs
+
+
+def _refined_start(yaw: float, src_t: np.ndarray, src_n: np.ndarray, tree: cKDTree, tgt_t: np.ndarray,
+                   normals: np.ndarray, u_t: np.ndarray, R_up: np.ndarray, c_src: np.ndarray, c_tgt: np.ndarray,
+                   vp_t: np.ndarray, mc: float, icp_iterations: int) -> dict:
+    """One yaw start refined by the 4-DoF point-to-plane ICP, with its scores: RMS of the truncated residuals
+    (``rms_m``), inlier RMSE and fitness, the share of source normals facing the target's sensor and the yaw."""
+    R = Rotation.from_rotvec(u_t * yaw).as_matrix() @ R_up
+    t = fit_translation(src_t, tree, tgt_t, R, c_tgt - R @ c_src, mc)
+    R, t, JtJ, n_it = point_to_plane_4dof(src_t, tree, tgt_t, normals, R, t, u_t, mc, icp_iterations)
+    d = tree.query(src_t @ R.T + t)[0]
+    inl = d < mc
+    rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
+    score = float(np.sqrt(truncated_cost(src_t, tree, R, t, mc)))
+    yaw_deg = float(np.degrees(_yaw_about(u_t, R @ np.linalg.inv(R_up))))
+    facing = float(np.mean(np.einsum("ij,ij->i", src_n @ R.T, vp_t - (src_t @ R.T + t)) > 0))
+    return {"R": R, "t": t, "JtJ": JtJ, "n_it": n_it, "rms_m": score, "rmse_m": rmse, "facing": facing,
+            "fitness": float(inl.mean()), "n_inliers": int(inl.sum()), "yaw_deg": yaw_deg}
 
 
 def _angle_deg(delta_deg: float) -> float:

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReportError
+from ..modes import MODES
 
-MODE_ORDER = ("dr", "position", "pose", "pose+heading")
+MODE_ORDER = MODES
 
 
 def _load_json(path: Path) -> dict | None:

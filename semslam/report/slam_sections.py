@@ -11,12 +11,10 @@ from .html import Figure, Section, figure_to_png
 from .inputs import _load_csv_dicts, _load_json, load_trajectory_csv
 from .recognition_sections import _objects_xy
 from .summary import human_label
+from ..modes import GRAPH_BACKENDS
 
 
 def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
-    from ..slam.consistency import chi2_band
-    from .plots import plot_error_bounds, plot_smoothed_errors, plot_trajectories
-
     trajs = {mode: load_trajectory_csv(d / "trajectory.csv") for mode, d in runs.items()}
     metrics = {mode: _load_json(d / "metrics.json") or {} for mode, d in runs.items()}
     first = next(iter(trajs.values()))
@@ -24,6 +22,21 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
     if "truth_position_ned_m" in first:
         truth = {"stamp_s": first["stamp_s"], "position_ned_m": first["truth_position_ned_m"]}
     objects_xy = _objects_xy(run_dir)
+    landmarks = _mapped_landmarks(runs)
+    sections = [_section_fig4(trajs, metrics, truth, landmarks, objects_xy, plt)]
+    if truth is not None:
+        sections.append(_section_fig6(runs, trajs, truth, plt))
+        sections += _sections_smoothed(runs, trajs, metrics, truth, plt)
+        sections.append(_section_nees(trajs, plt))
+        if "pose+heading" in trajs and "yaw_bias_rad" in trajs["pose+heading"]:
+            sections.append(_section_heading_bias(trajs["pose+heading"], plt))
+    else:  # a recorded dive: no truth, so what the filter says of itself
+        sections += _sections_without_truth(trajs, landmarks, plt)
+    return sections
+
+
+def _mapped_landmarks(runs: dict[str, Path]) -> dict:
+    """Per mode (DR aside), the landmarks of its ``landmarks.csv`` with their position covariance."""
     landmarks = {}
     for mode, d in runs.items():
         lms = []
@@ -37,7 +50,12 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
             lms.append({"label": row.get("label", ""), "position_ned_m": pos, "cov": cov})
         if lms and mode != "dr":
             landmarks[mode] = lms
-    sections = []
+    return landmarks
+
+
+def _section_fig4(trajs: dict, metrics: dict, truth, landmarks: dict, objects_xy, plt) -> Section:
+    from .plots import plot_trajectories
+
     rows = []
     for mode, m in metrics.items():
         sm = m.get("smoother") or {}
@@ -55,67 +73,78 @@ def _sections_slam(run_dir: Path, runs: dict[str, Path], plt) -> list[Section]:
                   "uncertainty in the horizontal plane; stars: true object positions; crosses: mapped landmarks.",
                   tables=[("Trajectory metrics per mode (smoothed: RTS over the whole mission, offline"
                            + ("; with a graph backend, the graph's estimate at the end of the dive)"
-                              if any(m.get("backend") in ("isam2", "batch") for m in metrics.values()) else ")"),
+                              if any(m.get("backend") in GRAPH_BACKENDS for m in metrics.values()) else ")"),
                            ["mode", "ATE RMSE (m)", "smoothed ATE RMSE (m)", "final error (m)", "max error (m)",
                             "mean position NEES (dof 3)", "landmarks"], rows)],
                   figures=[Figure("fig4_trajectories.png", figure_to_png(fig), "Trajectories, 3-sigma ellipses, landmarks.")])
-    sections.append(sec)
-    if truth is not None:
-        det_stamps = []
-        pose_dir = runs.get("pose") or next(iter(runs.values()))
-        for row in _load_csv_dicts(pose_dir / "updates.csv"):
-            if row.get("kind") == "landmark" and row.get("accepted") in ("True", "true", "1"):
-                det_stamps.append(float(row["stamp_s"]))
-        fig6 = {m: trajs[m] for m in ("dr", "position", "pose") if m in trajs} or trajs
-        fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True)
-        plot_error_bounds(axes, fig6, truth, detection_stamps_s=det_stamps,
-                          title="Fig. 6: position error (solid) and +-3-sigma bounds (dashed); green lines: landmark updates")
-        sections.append(Section("Fig. 6: position error and +-3-sigma bounds over time",
-                                "Dead reckoning's bounds grow without limit; SLAM's shrink at every landmark update.",
-                                figures=[Figure("fig6_error_bounds.png", figure_to_png(fig), "Errors and 3-sigma bounds.")]))
-        smoothed = {mode: load_trajectory_csv(d / "trajectory_smoothed.csv") for mode, d in runs.items()
-                    if (d / "trajectory_smoothed.csv").is_file()}
-        graph = sorted({m.get("backend") for m in metrics.values()} & {"isam2", "batch"})
-        if smoothed and graph:
-            from .backends import section_graph_run
+    return sec
 
-            sections.append(section_graph_run(graph[0], trajs, smoothed, truth, plt))
-        elif smoothed:
-            fig, ax = plt.subplots(figsize=(10, 3.8))
-            plot_smoothed_errors(ax, trajs, smoothed, truth,
-                                 title="Position error: online filter (solid) and RTS-smoothed trajectory (dotted)")
-            sections.append(Section(
-                "Online and smoothed trajectories",
-                "The online filter's estimate at each time uses the measurements up to that time: in the first loop it "
-                "drifts like dead reckoning until the vehicle sees its first landmark again. The RTS smoother "
-                "(semslam.slam.smoother) conditions every epoch on the whole mission and carries that loop closure "
-                "back (offline; the online estimate is unchanged).",
-                figures=[Figure("fig_smoothed_errors.png", figure_to_png(fig), "Online vs smoothed position error.")]))
+
+def _section_fig6(runs: dict[str, Path], trajs: dict, truth: dict, plt) -> Section:
+    from .plots import plot_error_bounds
+
+    det_stamps = []
+    pose_dir = runs.get("pose") or next(iter(runs.values()))
+    for row in _load_csv_dicts(pose_dir / "updates.csv"):
+        if row.get("kind") == "landmark" and row.get("accepted") in ("True", "true", "1"):
+            det_stamps.append(float(row["stamp_s"]))
+    fig6 = {m: trajs[m] for m in ("dr", "position", "pose") if m in trajs} or trajs
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True)
+    plot_error_bounds(axes, fig6, truth, detection_stamps_s=det_stamps,
+                      title="Fig. 6: position error (solid) and +-3-sigma bounds (dashed); green lines: landmark updates")
+    return Section("Fig. 6: position error and +-3-sigma bounds over time",
+                   "Dead reckoning's bounds grow without limit; SLAM's shrink at every landmark update.",
+                   figures=[Figure("fig6_error_bounds.png", figure_to_png(fig), "Errors and 3-sigma bounds.")])
+
+
+def _sections_smoothed(runs: dict[str, Path], trajs: dict, metrics: dict, truth: dict, plt) -> list[Section]:
+    from .plots import plot_smoothed_errors
+
+    sections = []
+    smoothed = {mode: load_trajectory_csv(d / "trajectory_smoothed.csv") for mode, d in runs.items()
+                if (d / "trajectory_smoothed.csv").is_file()}
+    graph = sorted({m.get("backend") for m in metrics.values()} & set(GRAPH_BACKENDS))
+    if smoothed and graph:
+        from .backends import section_graph_run
+
+        sections.append(section_graph_run(graph[0], trajs, smoothed, truth, plt))
+    elif smoothed:
         fig, ax = plt.subplots(figsize=(10, 3.8))
-        for mode, tr in trajs.items():
-            e = tr["position_ned_m"] - tr["truth_position_ned_m"]
-            try:
-                nees = np.einsum("ki,ki->k", e, np.linalg.solve(tr["position_cov"], e[..., None])[..., 0])
-            except np.linalg.LinAlgError:
-                continue
-            ax.plot(tr["stamp_s"], nees, lw=0.7, label=mode)
-        band = chi2_band(3, 1)
-        ax.axhspan(*band, color="green", alpha=0.12, label="95% chi-square band, dof 3, one run")
-        ax.set_yscale("log")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("position NEES [-]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-        ax.set_title("Position NEES over time (single run)")
-        sections.append(Section("Consistency: NEES over time (beyond the papers)",
-                                "Normalised estimation error squared of the vehicle position against the ground truth. "
-                                "Monte-Carlo averages (semslam montecarlo) narrow the band.",
-                                figures=[Figure("nees.png", figure_to_png(fig), "Position NEES with its 95% band.")]))
-        if "pose+heading" in trajs and "yaw_bias_rad" in trajs["pose+heading"]:
-            sections.append(_section_heading_bias(trajs["pose+heading"], plt))
-    else:  # a recorded dive: no truth, so what the filter says of itself
-        sections += _sections_without_truth(trajs, landmarks, plt)
+        plot_smoothed_errors(ax, trajs, smoothed, truth,
+                             title="Position error: online filter (solid) and RTS-smoothed trajectory (dotted)")
+        sections.append(Section(
+            "Online and smoothed trajectories",
+            "The online filter's estimate at each time uses the measurements up to that time: in the first loop it "
+            "drifts like dead reckoning until the vehicle sees its first landmark again. The RTS smoother "
+            "(semslam.slam.smoother) conditions every epoch on the whole mission and carries that loop closure "
+            "back (offline; the online estimate is unchanged).",
+            figures=[Figure("fig_smoothed_errors.png", figure_to_png(fig), "Online vs smoothed position error.")]))
     return sections
+
+
+def _section_nees(trajs: dict, plt) -> Section:
+    from ..slam.consistency import chi2_band
+
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    for mode, tr in trajs.items():
+        e = tr["position_ned_m"] - tr["truth_position_ned_m"]
+        try:
+            nees = np.einsum("ki,ki->k", e, np.linalg.solve(tr["position_cov"], e[..., None])[..., 0])
+        except np.linalg.LinAlgError:
+            continue
+        ax.plot(tr["stamp_s"], nees, lw=0.7, label=mode)
+    band = chi2_band(3, 1)
+    ax.axhspan(*band, color="green", alpha=0.12, label="95% chi-square band, dof 3, one run")
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position NEES [-]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title("Position NEES over time (single run)")
+    return Section("Consistency: NEES over time (beyond the papers)",
+                   "Normalised estimation error squared of the vehicle position against the ground truth. "
+                   "Monte-Carlo averages (semslam montecarlo) narrow the band.",
+                   figures=[Figure("nees.png", figure_to_png(fig), "Position NEES with its 95% band.")])
 
 
 #: a yaw-bias estimate that never leaves this band (deg) is "no bias estimated", not a signal

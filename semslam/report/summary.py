@@ -17,9 +17,10 @@ import json
 from pathlib import Path
 
 from .html import Section
+from ..modes import MODES
 
 #: filter modes in the order of the papers
-_MODES = ("dr", "position", "pose", "pose+heading")
+_MODES = MODES
 
 
 def human_label(label: str) -> str:

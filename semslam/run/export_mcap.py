@@ -104,24 +104,9 @@ def write_mcap(result: SlamResult, path: str | os.PathLike, *, frame_id: str = "
 
     from ..io.ros._encode import default_typestore, ros_header
 
-    check_result(result, "write_mcap", need_attitude=True)
     out, single = _check_target(path)
-    if (detections_by_scan is None) != (T_vehicle_scanner is None):
-        raise InputError("The 'T_vehicle_scanner' argument of write_mcap must be given with 'detections_by_scan' "
-                         "(and only with it). Got only one of the two instead.")
-    if T_vehicle_scanner is not None and not isinstance(T_vehicle_scanner, RigidTransform):
-        raise InputError(f"The 'T_vehicle_scanner' argument of write_mcap must be a RigidTransform. "
-                         f"Got {type(T_vehicle_scanner).__name__} instead.")
-    var = np.zeros(3) if orientation_variance_rad2 is None else np.asarray(orientation_variance_rad2, dtype=float)
-    if var.shape != (3,) or not np.all(np.isfinite(var)) or np.any(var < 0):
-        raise InputError(f"The 'orientation_variance_rad2' argument of write_mcap must be 3 finite variances >= 0 "
-                         f"(roll, pitch, yaw). Got {orientation_variance_rad2!r:.60} instead.")
-    stamps, pos_ned, R_ned = trajectory_poses(result, frame="ned", caller="write_mcap")
-    if len(stamps) == 0:
-        raise InputError("The 'result' argument of write_mcap must have at least one epoch. Got none instead.")
-    if int(time_origin_ns) + round(float(stamps.min()) * 1e9) < 0:
-        raise InputError(f"The 'time_origin_ns' argument of write_mcap must make every stamp >= 0 ns. "
-                         f"Got {time_origin_ns} with a first stamp of {stamps.min()} s instead.")
+    var, stamps, pos_ned, R_ned = _checked_inputs(result, detections_by_scan, T_vehicle_scanner, time_origin_ns,
+                                                  orientation_variance_rad2)
     ts = default_typestore()
     T = ts.types
     ns = lambda t: int(time_origin_ns) + int(round(float(t) * 1e9))  # noqa: E731
@@ -166,19 +151,52 @@ def write_mcap(result: SlamResult, path: str | os.PathLike, *, frame_id: str = "
                  T["visualization_msgs/msg/MarkerArray"](markers=_landmark_markers(result, ts, hdr(stamps[-1]), pt,
                                                                                    vec, qmsg, pose_msg))))
     if detections_by_scan is not None:
-        for scan_id in sorted(detections_by_scan):
-            placed = []
-            for det in detections_by_scan[scan_id]:
-                T_wv = _vehicle_pose_at(float(det.stamp_s), stamps, pos_ned, R_ned)
-                if T_wv is not None:
-                    T_wo = T_wv @ T_vehicle_scanner @ det.T_sensor_object
-                    placed.append((float(det.stamp_s), pose_msg(T_wo.translation_m, T_wo.rotation, False)))
-            if placed:
-                t0 = min(t for t, _ in placed)
-                msgs.append((ns(t0), 5, TOPICS["detections"], "geometry_msgs/msg/PoseArray",
-                             T["geometry_msgs/msg/PoseArray"](header=hdr(t0), poses=[p for _, p in placed])))
+        msgs += _detection_messages(detections_by_scan, T_vehicle_scanner, stamps, pos_ned, R_ned, ts, ns, hdr,
+                                    pose_msg)
     msgs.sort(key=lambda m: (m[0], m[1]))
     return _write_bag(out, single, msgs, ts, Writer, StoragePlugin)
+
+
+def _checked_inputs(result: SlamResult, detections_by_scan, T_vehicle_scanner, time_origin_ns: int,
+                    orientation_variance_rad2: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`write_mcap`'s arguments checked: ``(orientation variances (3,), stamps, positions NED, rotations)``."""
+    check_result(result, "write_mcap", need_attitude=True)
+    if (detections_by_scan is None) != (T_vehicle_scanner is None):
+        raise InputError("The 'T_vehicle_scanner' argument of write_mcap must be given with 'detections_by_scan' "
+                         "(and only with it). Got only one of the two instead.")
+    if T_vehicle_scanner is not None and not isinstance(T_vehicle_scanner, RigidTransform):
+        raise InputError(f"The 'T_vehicle_scanner' argument of write_mcap must be a RigidTransform. "
+                         f"Got {type(T_vehicle_scanner).__name__} instead.")
+    var = np.zeros(3) if orientation_variance_rad2 is None else np.asarray(orientation_variance_rad2, dtype=float)
+    if var.shape != (3,) or not np.all(np.isfinite(var)) or np.any(var < 0):
+        raise InputError(f"The 'orientation_variance_rad2' argument of write_mcap must be 3 finite variances >= 0 "
+                         f"(roll, pitch, yaw). Got {orientation_variance_rad2!r:.60} instead.")
+    stamps, pos_ned, R_ned = trajectory_poses(result, frame="ned", caller="write_mcap")
+    if len(stamps) == 0:
+        raise InputError("The 'result' argument of write_mcap must have at least one epoch. Got none instead.")
+    if int(time_origin_ns) + round(float(stamps.min()) * 1e9) < 0:
+        raise InputError(f"The 'time_origin_ns' argument of write_mcap must make every stamp >= 0 ns. "
+                         f"Got {time_origin_ns} with a first stamp of {stamps.min()} s instead.")
+    return var, stamps, pos_ned, R_ned
+
+
+def _detection_messages(detections_by_scan, T_vehicle_scanner: RigidTransform, stamps, pos_ned, R_ned, ts: Any,
+                        ns, hdr, pose_msg) -> list:
+    """One ``PoseArray`` per scan with the world poses of its detections (placed with the trajectory)."""
+    T = ts.types
+    msgs = []
+    for scan_id in sorted(detections_by_scan):
+        placed = []
+        for det in detections_by_scan[scan_id]:
+            T_wv = _vehicle_pose_at(float(det.stamp_s), stamps, pos_ned, R_ned)
+            if T_wv is not None:
+                T_wo = T_wv @ T_vehicle_scanner @ det.T_sensor_object
+                placed.append((float(det.stamp_s), pose_msg(T_wo.translation_m, T_wo.rotation, False)))
+        if placed:
+            t0 = min(t for t, _ in placed)
+            msgs.append((ns(t0), 5, TOPICS["detections"], "geometry_msgs/msg/PoseArray",
+                         T["geometry_msgs/msg/PoseArray"](header=hdr(t0), poses=[p for _, p in placed])))
+    return msgs
 
 
 def _landmark_markers(result: SlamResult, ts: Any, header: Any, pt, vec, qmsg, pose_msg) -> list:

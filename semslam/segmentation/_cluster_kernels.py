@@ -58,6 +58,10 @@ def _cell_boxes(points, order, cell_start):
     return boxes
 
 
+#: Neighbour rows (dy, dz) of a cell that can hold larger keys (see :func:`grid_components`).
+_N_ROWS = 13
+
+
 @njit(cache=True)
 def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     """Component label (the smallest cell index of the component) of each cell.
@@ -86,19 +90,8 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     tol2 = tol * tol
     parent = np.arange(m)
     boxes = _cell_boxes(points, order, cell_start)
-    n_rows = 13
-    row_offset = np.empty(n_rows, np.int64)
-    row_dy = np.empty(n_rows, np.int64)
-    row_dz = np.empty(n_rows, np.int64)
-    r = 0
-    for dz in range(3):
-        for dy in range(-2, 3):
-            if dz == 0 and dy < 0:
-                continue
-            row_offset[r] = nx * (dy + ny * dz)
-            row_dy[r] = dy
-            row_dz[r] = dz
-            r += 1
+    row_offset, row_dy, row_dz = _neighbour_rows(nx, ny)
+    n_rows = _N_ROWS
     ptr = np.zeros(n_rows, np.int64)
     for a in range(m):
         key_a = cell_keys[a]
@@ -117,42 +110,71 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
                         dx = cell_keys[b] - row
                         skip = abs(dx) == 2 and abs(row_dy[r]) == 2 and row_dz[r] == 2
                     if not skip:
-                        gap2 = 0.0
-                        for ax in range(3):
-                            g = max(
-                                boxes[b, ax] - boxes[a, 3 + ax], boxes[a, ax] - boxes[b, 3 + ax]
-                            )
-                            if g > 0.0:
-                                gap2 += g * g
-                        skip = gap2 >= tol2
-                    if not skip:
-                        joined = False
-                        for ia in range(cell_start[a], cell_start[a + 1]):
-                            pa = order[ia]
-                            xa = points[pa, 0]
-                            ya = points[pa, 1]
-                            za = points[pa, 2]
-                            for ib in range(cell_start[b], cell_start[b + 1]):
-                                pb = order[ib]
-                                ddx = points[pb, 0] - xa
-                                ddy = points[pb, 1] - ya
-                                ddz = points[pb, 2] - za
-                                if ddx * ddx + ddy * ddy + ddz * ddz < tol2:
-                                    joined = True
-                                    break
-                            if joined:
-                                break
-                        if joined:  # link the roots: the smaller index becomes the root
-                            if root_a < root_b:
-                                parent[root_b] = root_a
-                            else:
-                                parent[root_a] = root_b
-                                root_a = root_b
+                        skip = _box_gap2(boxes, a, b) >= tol2
+                    if not skip and _cells_touch(points, order, cell_start, a, b, tol2):
+                        # link the roots: the smaller index becomes the root
+                        if root_a < root_b:
+                            parent[root_b] = root_a
+                        else:
+                            parent[root_a] = root_b
+                            root_a = root_b
                 b += 1
     roots = np.empty(m, np.int64)
     for c in range(m):
         roots[c] = _find(parent, c)
     return roots
+
+
+@njit(cache=True)
+def _neighbour_rows(nx, ny):
+    """The 13 neighbour rows (dy, dz) of :func:`grid_components` that can hold larger keys (dz > 0, or
+    dz == 0 and dy >= 0): key offsets ``nx * (dy + ny * dz)`` (13,) int64, dy (13,) and dz (13,)."""
+    n_rows = _N_ROWS
+    row_offset = np.empty(n_rows, np.int64)
+    row_dy = np.empty(n_rows, np.int64)
+    row_dz = np.empty(n_rows, np.int64)
+    r = 0
+    for dz in range(3):
+        for dy in range(-2, 3):
+            if dz == 0 and dy < 0:
+                continue
+            row_offset[r] = nx * (dy + ny * dz)
+            row_dy[r] = dy
+            row_dz[r] = dz
+            r += 1
+    return row_offset, row_dy, row_dz
+
+
+@njit(cache=True, inline="always")
+def _box_gap2(boxes, a, b):
+    """Squared distance between the bounding boxes (rows of :func:`_cell_boxes`) of cells ``a`` and ``b``."""
+    gap2 = 0.0
+    for ax in range(3):
+        g = max(
+            boxes[b, ax] - boxes[a, 3 + ax], boxes[a, ax] - boxes[b, 3 + ax]
+        )
+        if g > 0.0:
+            gap2 += g * g
+    return gap2
+
+
+@njit(cache=True, inline="always")
+def _cells_touch(points, order, cell_start, a, b, tol2):
+    """True when some point of cell ``a`` and some point of cell ``b`` are closer than the tolerance
+    (squared distance < ``tol2``); stops at the first such pair."""
+    for ia in range(cell_start[a], cell_start[a + 1]):
+        pa = order[ia]
+        xa = points[pa, 0]
+        ya = points[pa, 1]
+        za = points[pa, 2]
+        for ib in range(cell_start[b], cell_start[b + 1]):
+            pb = order[ib]
+            ddx = points[pb, 0] - xa
+            ddy = points[pb, 1] - ya
+            ddz = points[pb, 2] - za
+            if ddx * ddx + ddy * ddy + ddz * ddz < tol2:
+                return True
+    return False
 
 
 @njit(cache=True)

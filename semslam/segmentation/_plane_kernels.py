@@ -71,56 +71,17 @@ def rmsac_plane(
     n_degenerate = 0
     eps = np.finfo(np.float64).eps
     while it < k and it < max_iterations:
-        i0 = _randint(seed, n)
-        i1 = _randint(seed, n)
-        i2 = _randint(seed, n)
-        ux = points[i1, 0] - points[i0, 0]
-        uy = points[i1, 1] - points[i0, 1]
-        uz = points[i1, 2] - points[i0, 2]
-        vx = points[i2, 0] - points[i0, 0]
-        vy = points[i2, 1] - points[i0, 1]
-        vz = points[i2, 2] - points[i0, 2]
-        a = uy * vz - uz * vy
-        b = uz * vx - ux * vz
-        c = ux * vy - uy * vx
-        cross2 = a * a + b * b + c * c
-        # sin(angle) < 1e-6, or a repeated point: no well-defined plane
-        if (
-            cross2 <= 1e-12 * (ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)
-            or cross2 == 0.0
-        ):
+        degenerate, a, b, c, d = _sample_plane(points, seed, n)
+        if degenerate:
             n_degenerate += 1
             if n_degenerate > max_degenerate:
                 break
             continue
-        norm = np.sqrt(cross2)
-        a /= norm
-        b /= norm
-        c /= norm
-        d = -(a * points[i0, 0] + b * points[i0, 1] + c * points[i0, 2])
         if n_scored > 0 and n_pretest > 0:
-            passed = True
-            for _ in range(n_pretest):
-                j = _randint(seed, n)
-                if abs(a * points[j, 0] + b * points[j, 1] + c * points[j, 2] + d) > threshold:
-                    passed = False
-                    break
-            if not passed:
+            if not _passes_pretest(points, a, b, c, d, threshold, n_pretest, seed, n):
                 it += 1
                 continue
-        penalty = 0.0
-        count = 0
-        complete = True
-        for i in range(n):
-            dist = abs(a * points[i, 0] + b * points[i, 1] + c * points[i, 2] + d)
-            if dist < threshold:
-                penalty += dist
-                count += 1
-            else:
-                penalty += threshold
-            if penalty >= best_penalty:  # cannot win any more: stop scoring (exact)
-                complete = False
-                break
+        penalty, count, complete = _msac_penalty(points, a, b, c, d, threshold, best_penalty)
         n_scored += 1
         it += 1
         if complete and penalty < best_penalty:
@@ -135,6 +96,69 @@ def rmsac_plane(
             p_no_outliers = min(max(p_no_outliers, eps), 1.0 - eps)
             k = log_one_minus_p / np.log(p_no_outliers)
     return best, it, n_scored, n_degenerate, best_inliers
+
+
+@njit(cache=True, inline="always")
+def _sample_plane(points, seed, n):
+    """Plane ``(a, b, c, d)`` (unit normal) through three random points of :func:`rmsac_plane`, drawn in
+    order i0, i1, i2: ``(degenerate, a, b, c, d)``, ``degenerate`` True (and the plane zero) when the
+    points are repeated or collinear (sin(angle) < 1e-6)."""
+    i0 = _randint(seed, n)
+    i1 = _randint(seed, n)
+    i2 = _randint(seed, n)
+    ux = points[i1, 0] - points[i0, 0]
+    uy = points[i1, 1] - points[i0, 1]
+    uz = points[i1, 2] - points[i0, 2]
+    vx = points[i2, 0] - points[i0, 0]
+    vy = points[i2, 1] - points[i0, 1]
+    vz = points[i2, 2] - points[i0, 2]
+    a = uy * vz - uz * vy
+    b = uz * vx - ux * vz
+    c = ux * vy - uy * vx
+    cross2 = a * a + b * b + c * c
+    # sin(angle) < 1e-6, or a repeated point: no well-defined plane
+    if (
+        cross2 <= 1e-12 * (ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)
+        or cross2 == 0.0
+    ):
+        return True, 0.0, 0.0, 0.0, 0.0
+    norm = np.sqrt(cross2)
+    a /= norm
+    b /= norm
+    c /= norm
+    d = -(a * points[i0, 0] + b * points[i0, 1] + c * points[i0, 2])
+    return False, a, b, c, d
+
+
+@njit(cache=True, inline="always")
+def _passes_pretest(points, a, b, c, d, threshold, n_pretest, seed, n):
+    """T(d,d) pre-test of :func:`rmsac_plane`: ``n_pretest`` random points (with replacement) all
+    within ``threshold`` of the plane; stops drawing at the first one beyond."""
+    for _ in range(n_pretest):
+        j = _randint(seed, n)
+        if abs(a * points[j, 0] + b * points[j, 1] + c * points[j, 2] + d) > threshold:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _msac_penalty(points, a, b, c, d, threshold, best_penalty):
+    """MSAC cost ``sum_i min(|n.p_i + d|, T)`` of a plane and its inlier count (distance < T), in point
+    order: ``(penalty, count, complete)``, ``complete`` False when scoring stopped early because the
+    cost reached ``best_penalty`` (the plane cannot win any more: exact)."""
+    n = points.shape[0]
+    penalty = 0.0
+    count = 0
+    for i in range(n):
+        dist = abs(a * points[i, 0] + b * points[i, 1] + c * points[i, 2] + d)
+        if dist < threshold:
+            penalty += dist
+            count += 1
+        else:
+            penalty += threshold
+        if penalty >= best_penalty:  # cannot win any more: stop scoring (exact)
+            return penalty, count, False
+    return penalty, count, True
 
 
 @njit(cache=True)

@@ -209,6 +209,47 @@ def segment_scene(
         Never raises on a scene that is too small or degenerate: the planes or clusters are then
         empty and ``notes`` says why.
     """
+    cfg = _checked_inputs(cloud, config)
+    notes: list[str] = []
+    timings: dict[str, float] = {}
+    n_input = cloud.n_points
+    t_start = t0 = time.perf_counter()
+
+    cloud, kept_indices = _prefiltered(cloud, cfg, notes)
+    leaf, tolerance, spacing = resolve_lengths(cloud.points_xyz_m, cfg.voxel_leaf_m, cfg.cluster_tolerance_m,
+                                               seed=0)
+    resolved = {"voxel_leaf_m": leaf, "cluster_tolerance_m": tolerance, "spacing_m": spacing}
+    seg_cloud, point_voxel, voxel_points = _voxel_stage(cloud, leaf)
+    timings["voxel"] = (time.perf_counter() - t0) * 1e3
+
+    t0 = time.perf_counter()
+    pts = seg_cloud.points_xyz_m
+    planes, remaining = _plane_stage(pts, cfg, seed, notes)
+    timings["planes"] = (time.perf_counter() - t0) * 1e3
+
+    t0 = time.perf_counter()
+    cluster_indices = _cluster_stage(pts, remaining, tolerance, cfg, notes)
+    clusters = [seg_cloud.select(idx) for idx in cluster_indices]
+    timings["clusters"] = (time.perf_counter() - t0) * 1e3
+    timings["total"] = (time.perf_counter() - t_start) * 1e3
+    return SegmentationResult(
+        seg_cloud,
+        planes,
+        cluster_indices,
+        clusters,
+        point_voxel,
+        n_input,
+        len(remaining),
+        timings,
+        notes,
+        voxel_points,
+        kept_indices,
+        resolved,
+    )
+
+
+def _checked_inputs(cloud: PointCloud, config: SegmentationConfig | None) -> SegmentationConfig:
+    """The configuration of :func:`segment_scene` (default ``SegmentationConfig()``), after checking the types."""
     if not isinstance(cloud, PointCloud):
         raise InputError(
             f"The 'cloud' argument of segment_scene must be a PointCloud. Got {type(cloud).__name__} instead."
@@ -219,11 +260,14 @@ def segment_scene(
             f"The 'config' argument of segment_scene must be a SegmentationConfig. "
             f"Got {type(config).__name__} instead."
         )
-    notes: list[str] = []
-    timings: dict[str, float] = {}
-    n_input = cloud.n_points
-    t_start = t0 = time.perf_counter()
+    return cfg
 
+
+def _prefiltered(
+    cloud: PointCloud, cfg: SegmentationConfig, notes: list[str]
+) -> tuple[PointCloud, np.ndarray | None]:
+    """The valid returns within the working range (:mod:`.prefilter`) and their indices into ``cloud`` (None when
+    every point is kept); a note says how many points were left out and why."""
     kept = valid_return_mask(cloud.points_xyz_m, cloud.viewpoint_xyz_m, drop_origin=cfg.drop_origin,
                              min_range_m=float(cfg.min_range_m), max_range_m=cfg.max_range_m)
     kept_indices = None
@@ -232,10 +276,14 @@ def segment_scene(
         notes.append(f"{cloud.n_points - len(kept_indices)} point(s) left out: "
                      + _dropped_text(cloud, kept, cfg))
         cloud = cloud.select(kept_indices)
-    leaf, tolerance, spacing = resolve_lengths(cloud.points_xyz_m, cfg.voxel_leaf_m, cfg.cluster_tolerance_m,
-                                               seed=0)
-    resolved = {"voxel_leaf_m": leaf, "cluster_tolerance_m": tolerance, "spacing_m": spacing}
+    return cloud, kept_indices
 
+
+def _voxel_stage(
+    cloud: PointCloud, leaf: float | None
+) -> tuple[PointCloud, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+    """The cloud to segment (voxel centroids, or ``cloud`` itself without a grid or points), each point's voxel
+    row and the voxel grid's (packed point order, run starts); both None without a grid."""
     point_voxel = None
     voxel_points = None
     seg_cloud = cloud
@@ -255,10 +303,14 @@ def segment_scene(
             viewpoint_xyz_m=cloud.viewpoint_xyz_m,
             frame_id=cloud.frame_id,
         )
-    timings["voxel"] = (time.perf_counter() - t0) * 1e3
+    return seg_cloud, point_voxel, voxel_points
 
-    t0 = time.perf_counter()
-    pts = seg_cloud.points_xyz_m
+
+def _plane_stage(
+    pts: np.ndarray, cfg: SegmentationConfig, seed: int | np.random.Generator | None, notes: list[str]
+) -> tuple[list[PlaneModel], np.ndarray]:
+    """The planes removed from ``pts`` (RMSAC, far outliers left out of the fit) and the sorted indices of the
+    remaining points (all of them when no plane is removed); notes say why fewer planes than asked were removed."""
     planes: list[PlaneModel] = []
     remaining = None
     if len(pts) == 0:
@@ -268,20 +320,10 @@ def segment_scene(
             near = _near_points(pts)
             plane_pts = pts if near is None else pts[near]
             n = len(plane_pts)
-            removal = _remove_planes(
-                plane_pts,
-                float(cfg.distance_threshold_m),
-                cfg.max_planes,
-                max(3, math.ceil(0.05 * n))
-                if cfg.min_plane_inliers is None
-                else cfg.min_plane_inliers,
-                False,
-                float(cfg.plane_confidence),
-                cfg.plane_max_iterations,
-                cfg.plane_n_pretest,
-                as_rng(seed, caller="segment_scene"),
-                "remove_dominant_planes",
-            )
+            min_inliers = max(3, math.ceil(0.05 * n)) if cfg.min_plane_inliers is None else cfg.min_plane_inliers
+            removal = _remove_planes(plane_pts, float(cfg.distance_threshold_m), cfg.max_planes, min_inliers, False,
+                                     float(cfg.plane_confidence), cfg.plane_max_iterations, cfg.plane_n_pretest,
+                                     as_rng(seed, caller="segment_scene"), "remove_dominant_planes")
             planes, remaining = removal.planes, removal.remaining_indices
             if near is not None:  # far outliers are in no plane: back with the remaining points, in order
                 keep = np.ones(len(pts), dtype=bool)
@@ -296,9 +338,14 @@ def segment_scene(
             notes.append(f"no plane removed: {exc}")
     if remaining is None:
         remaining = np.arange(len(pts), dtype=np.int64)
-    timings["planes"] = (time.perf_counter() - t0) * 1e3
+    return planes, remaining
 
-    t0 = time.perf_counter()
+
+def _cluster_stage(
+    pts: np.ndarray, remaining: np.ndarray, tolerance: float, cfg: SegmentationConfig, notes: list[str]
+) -> list[np.ndarray]:
+    """Euclidean clusters of ``pts[remaining]`` as sorted indices into ``pts``, largest first; a note says why
+    there is none."""
     cluster_indices: list[np.ndarray] = []
     if len(pts) and len(remaining) == 0:
         notes.append("no points left after plane removal: no clusters")
@@ -315,23 +362,7 @@ def segment_scene(
                 f"no cluster of {cfg.min_cluster_size} to {cfg.max_cluster_size} points among the "
                 f"{len(remaining)} points left after plane removal"
             )
-    clusters = [seg_cloud.select(idx) for idx in cluster_indices]
-    timings["clusters"] = (time.perf_counter() - t0) * 1e3
-    timings["total"] = (time.perf_counter() - t_start) * 1e3
-    return SegmentationResult(
-        seg_cloud,
-        planes,
-        cluster_indices,
-        clusters,
-        point_voxel,
-        n_input,
-        len(remaining),
-        timings,
-        notes,
-        voxel_points,
-        kept_indices,
-        resolved,
-    )
+    return cluster_indices
 
 
 def _dropped_text(cloud: PointCloud, kept: np.ndarray, cfg: SegmentationConfig) -> str:

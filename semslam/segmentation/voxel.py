@@ -9,7 +9,7 @@ Differences from PCL 1.13: PCL computes the voxel index as ``floor(p * (1/leaf))
 averages in float32. By default we compute ``floor(p / leaf)`` in float64, so a point lying within
 float32 rounding of a voxel boundary may land in the neighbouring voxel (PCL's mug scene at 5 mm:
 32,895 voxels against PCL's 32,921). ``pcl_rounding=True`` reproduces PCL's float32 index
-arithmetic, and then the voxel counts agree exactly (tests/test_voxel.py); centroids stay float64
+arithmetic, and then the voxel counts agree exactly (tests/segmentation/test_voxel.py); centroids stay float64
 means (they differ from PCL's float32 sums by ~1e-7 relative). PCL also refuses to filter (returns
 the input) when the grid has more than 2**31 voxels; we use 64-bit keys and fall back to a
 row-wise sort when even those would overflow.

@@ -1,4 +1,5 @@
-"""Object measurements, their innovation against a landmark, gating and data association.
+"""Object measurements and their innovation against a landmark (the gates and the data association:
+:mod:`semslam.slam.association_search`, re-exported here).
 
 Measurement model (Himri et al. 2018, eq. 4-5), with two fixes:
 
@@ -22,6 +23,7 @@ fail a gate whose covariance is first-order (issue 17: duplicates of the surveye
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +32,7 @@ from ..errors import SlamError
 from ..geometry import RigidTransform, rpy_from_rotation, rotation_from_rpy, wrap_angle
 from ..symmetry import Symmetry
 from . import _ekf_kernels as kern
+from .association_search import GateThresholds, associate, associate_jcbb  # noqa: F401 - re-exported
 from .ekf import SemanticEkf
 
 _EZ = np.array([0.0, 0.0, 1.0])
@@ -182,16 +185,7 @@ def iterated_innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurem
     graph's relinearisation threshold). So the iteration corrects the linear gate's false rejections and the
     updates of large heading errors, and leaves the rest as it was. None: iterate every row asked for.
     """
-    if isinstance(rows, str) or not set(rows) <= {"position", "pose"}:
-        raise SlamError(f"The 'rows' argument of iterated_innovation must be a sequence of 'position' and/or 'pose'. "
-                        f"Got {rows!r} instead.")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
-        raise SlamError(f"The 'max_iterations' argument of iterated_innovation must be an integer >= 1. "
-                        f"Got {max_iterations!r} instead.")
-    if not tol > 0:
-        raise SlamError(f"The 'tol' argument of iterated_innovation must be > 0. Got {tol!r} instead.")
-    if not linear_tol >= 0:
-        raise SlamError(f"The 'linear_tol' argument of iterated_innovation must be >= 0. Got {linear_tol!r} instead.")
+    _check_iteration_arguments(rows, max_iterations, tol, linear_tol)
     nv = ekf.n_v
     off = ekf.landmarks[landmark_id].offset
     idx = np.concatenate([np.arange(nv), off + np.arange(6)])
@@ -218,16 +212,10 @@ def iterated_innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurem
     def kept(d2_lin: float, dof: int) -> bool:
         if keep_within is None or d2_lin > keep_within[dof]:
             return False
-        m = 3 if dof == 3 else m_pose  # the linearisation's own error one Gauss-Newton step away, in noise units
-        Hm, num, Nm = H0[:m], nu0[:m], N[:m, :m]
-        x1 = x0.copy()
-        try:
-            x1[curved] += (P @ Hm.T @ np.linalg.solve(S0[:m, :m], num))[curved]
-        except np.linalg.LinAlgError:
-            return False
-        _, nu1, _ = _model_at(ekf, x1, meas, R_wv_ahrs, attitude_cov_world, B, orientation_innovation)
-        delta = nu1[:m] + Hm @ (x1 - x0) - num
-        return kern.mahalanobis2(delta, Nm) <= linear_tol ** 2
+        m = 3 if dof == 3 else m_pose
+        return _linearisation_adequate(lambda x: _model_at(ekf, x, meas, R_wv_ahrs, attitude_cov_world, B,
+                                                           orientation_innovation)[1],
+                                       x0, P, H0[:m], nu0[:m], N[:m, :m], S0[:m, :m], curved, linear_tol)
 
     Hp, nup, Sp = H[:3], nu[:3], S[:3, :3]
     if "position" in rows and not kept(d2p, 3):
@@ -237,6 +225,36 @@ def iterated_innovation(ekf: SemanticEkf, landmark_id: int, meas: ObjectMeasurem
         H, nu, S = solve(m_pose)
         d2 = kern.mahalanobis2(nu, S)
     return Innovation(idx, H, nu, N, S, d2, d2p, Hp, nup)
+
+
+def _check_iteration_arguments(rows: Any, max_iterations: Any, tol: Any, linear_tol: Any) -> None:
+    """:class:`SlamError` naming the argument of :func:`iterated_innovation` that is not what it must be."""
+    if isinstance(rows, str) or not set(rows) <= {"position", "pose"}:
+        raise SlamError(f"The 'rows' argument of iterated_innovation must be a sequence of 'position' and/or 'pose'. "
+                        f"Got {rows!r} instead.")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
+        raise SlamError(f"The 'max_iterations' argument of iterated_innovation must be an integer >= 1. "
+                        f"Got {max_iterations!r} instead.")
+    if not tol > 0:
+        raise SlamError(f"The 'tol' argument of iterated_innovation must be > 0. Got {tol!r} instead.")
+    if not linear_tol >= 0:
+        raise SlamError(f"The 'linear_tol' argument of iterated_innovation must be >= 0. Got {linear_tol!r} instead.")
+
+
+def _linearisation_adequate(innovation_at, x0: np.ndarray, P: np.ndarray, Hm: np.ndarray, num: np.ndarray,
+                            Nm: np.ndarray, Sm: np.ndarray, curved: np.ndarray, linear_tol: float) -> bool:
+    """Whether the rows ``(Hm, num)`` (noise ``Nm``, innovation covariance ``Sm``) linearised at ``x0`` stay within
+    ``linear_tol`` noise standard deviations of the model (``innovation_at(x) -> nu``, the rows first) one
+    Gauss-Newton step away: the linearisation's own error, in noise units."""
+    m = len(num)
+    x1 = x0.copy()
+    try:
+        x1[curved] += (P @ Hm.T @ np.linalg.solve(Sm, num))[curved]
+    except np.linalg.LinAlgError:
+        return False
+    nu1 = innovation_at(x1)
+    delta = nu1[:m] + Hm @ (x1 - x0) - num
+    return kern.mahalanobis2(delta, Nm) <= linear_tol ** 2
 
 
 def _gauss_newton(model, x0: np.ndarray, P: np.ndarray, H: np.ndarray, nu: np.ndarray, N: np.ndarray,
@@ -332,76 +350,3 @@ def _model_at(ekf, x: np.ndarray, meas: ObjectMeasurement, R_wv_ahrs: np.ndarray
             if ekf.yaw_bias:
                 H[3:, ekf.i_yaw] = B.T @ _EZ
     return H, nu, 0.5 * (N + N.T)
-
-
-@dataclass(frozen=True)
-class GateThresholds:
-    """Chi-square gates (squared Mahalanobis distance) at probability ``probability``."""
-
-    probability: float = 0.99
-
-    def threshold(self, dof: int) -> float:
-        from scipy.stats import chi2  # lazily: scipy.stats costs ~1 s to import
-
-        return float(chi2.ppf(self.probability, dof))
-
-
-def associate(d2: np.ndarray, gate: np.ndarray) -> list[tuple[int, int]]:
-    """Global nearest neighbour: pairs ``(measurement, landmark)`` minimising the summed squared
-    Mahalanobis distance among gated pairs (Hungarian algorithm). ``d2``, ``gate``: (n_meas, n_landmarks)."""
-    if d2.size == 0:
-        return []
-    cost = np.where(gate, d2, 1e12)
-    from scipy.optimize import linear_sum_assignment
-
-    rows, cols = linear_sum_assignment(cost)
-    return [(int(r), int(c)) for r, c in zip(rows, cols) if gate[r, c]]
-
-
-def associate_jcbb(innovations: dict[tuple[int, int], Innovation], ekf: SemanticEkf, n_meas: int,
-                   gate: np.ndarray, probability: float) -> list[tuple[int, int]]:
-    """Joint compatibility branch and bound (Neira & Tardos 2001) on the position rows.
-
-    Maximises the number of pairings, then minimises the joint squared Mahalanobis distance; a hypothesis
-    is kept only if its stacked innovation passes the joint chi-square test (``3 * pairs`` dof).
-    """
-    best: list = [[], np.inf]
-
-    def joint_d2(pairs):
-        if not pairs:
-            return 0.0
-        idx = np.unique(np.concatenate([innovations[p].idx for p in pairs]))
-        pos = {g: i for i, g in enumerate(idx)}
-        Hs, nus, Rs = [], [], []
-        for p in pairs:
-            inn = innovations[p]
-            Hp, nup, Rp = inn.rows("position")
-            Hrow = np.zeros((3, len(idx)))
-            Hrow[:, [pos[g] for g in inn.idx]] = Hp
-            Hs.append(Hrow)
-            nus.append(nup)
-            Rs.append(Rp)
-        H = np.vstack(Hs)
-        from scipy.linalg import block_diag
-
-        S = H @ ekf.cov(idx) @ H.T + block_diag(*Rs)
-        return kern.mahalanobis2(np.concatenate(nus), S)
-
-    def recurse(i, pairs, used):
-        if len(pairs) + (n_meas - i) < len(best[0]):
-            return
-        if i == n_meas:
-            d2 = joint_d2(pairs)
-            if len(pairs) > len(best[0]) or (len(pairs) == len(best[0]) and d2 < best[1]):
-                best[0], best[1] = list(pairs), d2
-            return
-        for j in np.flatnonzero(gate[i]):
-            if j in used:
-                continue
-            cand = pairs + [(i, int(j))]
-            if joint_d2(cand) <= GateThresholds(probability).threshold(3 * len(cand)):
-                recurse(i + 1, cand, used | {int(j)})
-        recurse(i + 1, pairs, used)
-
-    recurse(0, [], frozenset())
-    return best[0]

@@ -24,9 +24,8 @@ from typing import Any
 from .._validation import check_choice
 from ..errors import ConfigError, SemslamError
 from ..limits import LIMITS, check as check_limit
+from ..modes import MODES  # noqa: F401 (semslam.slam.config.MODES, read by the filter's users)
 
-#: the filter's modes (see :mod:`semslam.slam.session`)
-MODES = ("dr", "position", "pose", "pose+heading")
 
 
 def _check_types(obj) -> None:

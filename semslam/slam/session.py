@@ -36,15 +36,17 @@ from .._validation import as_float_array, check_choice
 from ..dataset import VehicleDescription
 from ..detection import Detection
 from ..errors import SlamError
-from ..geometry import RigidTransform, rotation_from_rpy
-from ..limits import LIMITS, check as check_limit
+from ..geometry import rotation_from_rpy
+from ..limits import LIMITS
 from ..symmetry import Symmetry
 from .config import MODES, SlamConfig
 from .ekf import SemanticEkf
 from .mapping import ObjectMapper
-from .consistency import nis_summary
 from .results import LandmarkEstimate, SlamEstimate, SlamResult
 from .sensors import AttitudeInput, DepthModel, DvlModel, PositionFixModel, SensorGate
+from .session_inputs import (check_attitude_stamp, check_initial_position_cov, check_joint_covariance, check_stamp,
+                             check_start_stamp, check_surveyed_landmarks, initial_covariance)
+from .session_result import landmark_estimates, slam_result
 from .smoother import RtsRecorder
 
 _ORDER = {"dvl": 1, "depth": 2, "fix": 3, "detections": 4}
@@ -105,26 +107,11 @@ class SlamSession:
             self._used = dict(start.used_stamps_s)
         self.symmetries = dict(symmetries or {})
         self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
-        self._P0p = None
-        if initial_position_cov_m2 is not None:
-            P = as_float_array("initial_position_cov_m2", initial_position_cov_m2, (3, 3), caller="SlamSession",
-                               error=SlamError)
-            if not np.allclose(P, P.T) or np.linalg.eigvalsh(0.5 * (P + P.T)).min() <= 0:
-                raise SlamError("The 'initial_position_cov_m2' argument of SlamSession must be symmetric positive "
-                                f"definite. Got {P.tolist()} instead.")
-            self._P0p = 0.5 * (P + P.T)
+        self._P0p = check_initial_position_cov(initial_position_cov_m2)
         self._v_known = initial_velocity_body_mps is not None
         self._v0 = np.zeros(3) if not self._v_known else as_float_array(
             "initial_velocity_body_mps", initial_velocity_body_mps, (3,), caller="SlamSession", error=SlamError)
-        if start_stamp_s is not None:
-            try:
-                ok = not isinstance(start_stamp_s, bool) and math.isfinite(float(start_stamp_s))
-            except (TypeError, ValueError):
-                ok = False
-            if not ok:
-                raise SlamError(f"The 'start_stamp_s' argument of SlamSession must be finite (seconds). "
-                                f"Got {start_stamp_s!r} instead.")
-        self._t0 = None if start_stamp_s is None else float(start_stamp_s)
+        self._t0 = check_start_stamp(start_stamp_s)
         self.attitude = AttitudeInput(vehicle.attitude.noise_rpy_rad, cfg.motion.propagate_attitude_noise)
         self.dvl = DvlModel(vehicle, cfg.motion.dvl_use_beam_ranges)
         self.depth = DepthModel(vehicle)
@@ -154,20 +141,10 @@ class SlamSession:
         heading = self.mode == "pose+heading"
         calib = cfg.motion.dvl_calibration and any(v > 0 for v in (d.scale_factor_sigma, d.misalignment_sigma_rad,
                                                                d.bias_sigma_mps, d.degraded_bias_sigma_mps))
-        init = cfg.initialisation
-        v_sigma = np.broadcast_to(init.initial_velocity_sigma_mps if self._v_known
-                                  else np.asarray(cfg.motion.unknown_velocity_sigma_mps, dtype=float), (3,))
-        var0 = [init.initial_position_sigma_m ** 2] * 3 + [float(x) ** 2 for x in v_sigma]
         self._last_dvl_s = self._t0 if self._v_known else -math.inf  #: last accepted DVL sample (unaided after it)
         self._was_unaided = False
-        if calib:
-            var0 += [max(d.bias_sigma_mps, 1e-6) ** 2] * 3 + [1e-12] * 3 + [max(d.scale_factor_sigma, 1e-6) ** 2,
-                                                                          max(d.misalignment_sigma_rad, 1e-6) ** 2]
-        if heading:
-            var0 += [cfg.motion.yaw_bias_sigma_rad ** 2]
-        P0 = np.diag(var0)
-        if self._P0p is not None:
-            P0[0:3, 0:3] = self._P0p
+        P0 = initial_covariance(cfg, d, velocity_known=self._v_known, dvl_calibration=calib, yaw_bias=heading,
+                                position_cov_m2=self._P0p)
         ekf = self._make_filter(self._p0, self._v0, P0, yaw_bias=heading, dvl_calibration=calib,
                                 dvl_bias_sigma_mps=d.bias_sigma_mps, dvl_bias_tau_s=d.bias_tau_s,
                                 dvl_slope_bias_sigma_mps=d.degraded_bias_sigma_mps,
@@ -213,60 +190,17 @@ class SlamSession:
         if self.ekf is not None:
             raise SlamError("SlamSession.add_surveyed_landmarks must be called before the first message.")
         if joint_covariance is not None:
-            J = as_float_array("joint_covariance", joint_covariance, (6 * len(list(names)), 6 * len(list(names))),
-                               caller="SlamSession.add_surveyed_landmarks", error=SlamError)
-            J = 0.5 * (J + J.T)
-            if self._surveyed or np.linalg.eigvalsh(J).min() <= 0:
-                raise SlamError("The joint covariance of the surveyed landmarks must be positive definite, and given "
-                                "in a single call.")
+            J = check_joint_covariance(joint_covariance, names, bool(self._surveyed))
             self._joint = J
             covariances_6x6 = [J[6 * k:6 * k + 6, 6 * k:6 * k + 6] for k in range(len(list(names)))]
-        names, labels, poses = list(names), list(labels), list(T_world_objects)
-        if not (len(names) == len(labels) == len(poses)) or not all(isinstance(T, RigidTransform) for T in poses):
-            raise SlamError("SlamSession.add_surveyed_landmarks needs as many names, labels and RigidTransform poses.")
-        covs = [None] * len(poses) if covariances_6x6 is None else list(covariances_6x6)
-        if len(covs) != len(poses):
-            raise SlamError("SlamSession.add_surveyed_landmarks needs as many covariances as poses.")
-        for k, C in enumerate(covs):
-            if C is not None:
-                C = as_float_array("covariances_6x6", C, (6, 6), caller="SlamSession.add_surveyed_landmarks",
-                                   error=SlamError)
-                if not np.allclose(C, C.T, atol=1e-12) or np.linalg.eigvalsh(0.5 * (C + C.T)).min() <= 0:
-                    raise SlamError(f"The covariance of surveyed landmark {names[k]!r} must be symmetric positive "
-                                    "definite.")
-                covs[k] = 0.5 * (C + C.T)
-        self._surveyed += list(zip(names, labels, poses, covs))
+        self._surveyed += check_surveyed_landmarks(names, labels, T_world_objects, covariances_6x6)
 
     # ------------------------------------------------------------------ messages
     def _stamp(self, stream: str, stamp_s: Any) -> float:
-        try:
-            t = float(stamp_s)
-        except (TypeError, ValueError):
-            raise SlamError(f"The {stream} stamp must be a number of seconds. Got {stamp_s!r} instead.") from None
-        if not math.isfinite(t):
-            raise SlamError(f"The {stream} stamp must be finite. Got {stamp_s!r} instead.")
-        if self._finished:
-            raise SlamError("The session is finished: no more messages.")
-        last = self._last_stamp.get(stream, -math.inf)
-        if t < last:
-            raise SlamError(f"The {stream} stamps must not decrease. Got {t!r} after {last!r}.")
-        if t < self._processed_s:
-            raise SlamError(f"A {stream} message stamped {t!r} arrived after the filter had processed up to "
-                            f"{self._processed_s!r}: messages may not arrive later than the attitude that covers them.")
-        prev = self._last_stamp.get("attitude", self._t0) if stream == "attitude" else None
-        if prev is not None and t - prev > LIMITS["stamps.attitude_gap_s"].hi:
-            # the filter predicts (and records history) through the gap: one stamp at 2^31 s was a hang
-            check_limit("stamps.attitude_gap_s", t - prev, f"The gap before the attitude stamp {t!r} s (after {prev!r} "
-                        "s; a corrupt stamp?)", error=SlamError)
-        span = t - self._t0 if stream == "attitude" and self._t0 is not None else 0.0
-        if span > 0:  # the whole run's work and memory, from its settings
-            out = self.cfg.output.history_rate_hz
-            check_limit("stamps.history_epochs", span * out, f"The history epochs up to the attitude stamp {t!r} s "
-                        f"({span:g} s after the start at history_rate_hz = {out:g}; lower it or split the dive)",
-                        error=SlamError)
-            check_limit("stamps.predict_steps", span / self.cfg.motion.max_predict_dt_s, "The prediction steps up to "
-                        f"the attitude stamp {t!r} s ({span:g} s after the start at max_predict_dt_s = "
-                        f"{self.cfg.motion.max_predict_dt_s:g}; raise it or split the dive)", error=SlamError)
+        t = check_stamp(stream, stamp_s, finished=self._finished, last_s=self._last_stamp.get(stream, -math.inf),
+                        processed_s=self._processed_s)
+        if stream == "attitude":
+            check_attitude_stamp(t, self._last_stamp.get("attitude", self._t0), self._t0, self.cfg)
         self._last_stamp[stream] = t
         if self.ekf is None:
             self._start(t)
@@ -438,9 +372,7 @@ class SlamSession:
 
     # ------------------------------------------------------------------ outputs
     def _landmarks(self) -> list[LandmarkEstimate]:
-        ekf = self.ekf
-        return [LandmarkEstimate(j, lm.label, ekf.landmark_pose(j), ekf.landmark_cov(j), lm.first_seen_s,
-                                 lm.last_seen_s, lm.n_updates, name=lm.name) for j, lm in enumerate(ekf.landmarks)]
+        return landmark_estimates(self.ekf)
 
     def estimate(self) -> SlamEstimate:
         """The current estimate (after every message the attitude covers)."""
@@ -464,56 +396,4 @@ class SlamSession:
         return self._result()
 
     def _result(self) -> SlamResult:
-        ekf, H, log = self.ekf, self._H, self.log
-        ekf.flush()
-        stamps = np.asarray(H["t"])
-        landmarks = self._landmarks()
-        metrics: dict = {"mode": self.mode, "n_landmarks": len(landmarks),
-                         "duration_s": float(stamps[-1] - stamps[0]) if len(stamps) else 0.0}
-        nis: dict = {}
-        for r in log:
-            if r.get("accepted") and "nis" in r and np.isfinite(r["nis"]):
-                key = r["kind"] if r["kind"] != "landmark" else f"landmark_{r['test']}_{r['dof']}dof"
-                nis.setdefault(key, ([], r["dof"]))[0].append(r["nis"])
-        metrics["nis"] = nis_summary(nis)
-        ups = [r for r in log if r["kind"] == "landmark" and r.get("accepted")]
-        metrics["landmark_updates"] = {"pose": sum(r["test"] == "pose" for r in ups),
-                                       "position": sum(r["test"] == "position" for r in ups),
-                                       "rejected": sum(r["kind"] == "landmark" and not r.get("accepted") for r in log)}
-        metrics["cross_class_updates"] = sum(r["label"] != r["landmark_label"] for r in ups)
-        metrics["dvl_rejected"] = sum(r["kind"] == "dvl" and not r["accepted"] for r in log)
-        metrics["dvl_degraded"] = sum(r["kind"] == "dvl" and r.get("reason") == "degraded" for r in log)
-        metrics["dvl_maneuver_resets"] = sum(r["kind"] == "dvl" and r.get("reason") == "maneuver" for r in log)
-        metrics["dvl_dropouts"] = sum(r["kind"] == "dvl_dropout" for r in log)
-        metrics["depth_rejected"] = sum(r["kind"] == "depth" and not r["accepted"] for r in log)
-        metrics["depth_updates"] = sum(r["kind"] == "depth" for r in log)
-        metrics["dvl_updates"] = sum(r["kind"] == "dvl" for r in log)
-        metrics["fix_updates"] = sum(r["kind"] == "fix" for r in log)
-        metrics["fix_rejected"] = sum(r["kind"] == "fix" and not r["accepted"] for r in log)
-        metrics["fix_unusable"] = sum(r["kind"] == "fix_unusable" for r in log)
-        metrics["skipped_beyond_attitude"] = sum(r["kind"].endswith("_beyond_attitude") for r in log)
-        metrics["skipped_before_start"] = self._before_start
-        metrics["skipped_implausible"] = dict(self._implausible)
-        sm = None
-        if ekf.recorder is not None:
-            sm = ekf.recorder.smooth(ekf)
-            metrics["smoother"] = {"status": ekf.recorder.status}
-            if sm is not None and len(sm.x) != len(stamps):  # pragma: no cover - guarded by construction
-                raise SlamError("internal error: smoothed epochs do not match the history")
-        return SlamResult(self.mode, stamps, np.asarray(H["p"]).reshape(-1, 3), np.asarray(H["Pp"]).reshape(-1, 3, 3),
-                          np.asarray(H["v"]).reshape(-1, 3), np.asarray(H["Pv"]).reshape(-1, 3, 3), np.asarray(H["b"]),
-                          None, landmarks, log, metrics, self.cfg,
-                          np.asarray(H["c"]).reshape(-1, 8) if ekf.dvl_calibration else None,
-                          np.asarray(H["bv"]) if ekf.yaw_bias else None,
-                          None if sm is None else sm.x[:, 0:3].copy(),
-                          None if sm is None else sm.P[:, 0:3, 0:3].copy(),
-                          None if sm is None else sm.x[:, 3:6].copy(), np.asarray(H["rpy"]).reshape(-1, 3),
-                          self._joint_landmark_cov())
-
-    def _joint_landmark_cov(self) -> np.ndarray | None:
-        ekf = self.ekf
-        if not ekf.landmarks:
-            return None
-        idx = np.concatenate([lm.offset + np.arange(6) for lm in ekf.landmarks])
-        C = ekf.cov(idx)
-        return 0.5 * (C + C.T)
+        return slam_result(self.mode, self.cfg, self.ekf, self._H, self.log, self._before_start, self._implausible)

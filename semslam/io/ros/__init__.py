@@ -29,7 +29,7 @@ from .frames import (
     vectors_frd_from_flu,
     vectors_ned_from_enu,
 )
-from .pointcloud2 import TIME_FIELDS, PointCloud2Data, decode_pointcloud2, encode_pointcloud2
+from .pointcloud2 import PointCloud2Data, decode_pointcloud2, encode_pointcloud2
 
 __all__ = [
     "Bag",
@@ -40,7 +40,6 @@ __all__ = [
     "R_world_enu_vehicle_flu_from_R_world_ned_vehicle_frd",
     "R_world_ned_vehicle_frd_from_R_world_enu_vehicle_flu",
     "R_world_ned_vehicle_frd_from_quat_xyzw",
-    "TIME_FIELDS",
     "TopicRecord",
     "decode_pointcloud2",
     "encode_pointcloud2",

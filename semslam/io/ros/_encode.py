@@ -87,6 +87,26 @@ def encode_pointcloud2(
         raise InputError(f"The 'height' argument of encode_pointcloud2 must be >= 1 and divide the {n} points. "
                          f"Got {height} instead.")
     width = n // height
+    columns = _point_columns(pts, intensity, time_offset_s, time_field, time_encoding, coords_dtype)
+    order = list(field_order) if field_order is not None else list(columns)
+    if sorted(order) != sorted(columns):
+        raise InputError(f"The 'field_order' argument of encode_pointcloud2 must list the fields "
+                         f"{sorted(columns)}. Got {order} instead.")
+    offsets, point_step, row_step, data = _packed_rows(columns, order, big_endian, height, width, field_gap_bytes,
+                                                       point_padding_bytes, row_padding_bytes)
+    ts = typestore if typestore is not None else default_typestore()
+    PointField = ts.types["sensor_msgs/msg/PointField"]
+    fields = [PointField(name=k, offset=offsets[k], datatype=_DATATYPE_OF[columns[k][0]], count=1) for k in order]
+    return ts.types["sensor_msgs/msg/PointCloud2"](
+        header=ros_header(ts, stamp_ns, frame_id), height=height, width=width, fields=fields,
+        is_bigendian=bool(big_endian), point_step=point_step, row_step=row_step, data=data.reshape(-1),
+        is_dense=bool(np.isfinite(pts).all()))
+
+
+def _point_columns(pts: np.ndarray, intensity: Any, time_offset_s: Any, time_field: str, time_encoding: str,
+                   coords_dtype: str) -> dict[str, tuple[str, np.ndarray]]:
+    """Per field of a point, its numpy type code and its values: x, y, z, then intensity and time when given."""
+    n = len(pts)
     coord_code = {"float32": "f4", "float64": "f8"}[coords_dtype]
     columns: dict[str, tuple[str, np.ndarray]] = {a: (coord_code, pts[:, i]) for i, a in enumerate("xyz")}
     if intensity is not None:
@@ -95,10 +115,15 @@ def encode_pointcloud2(
         t = np.asarray(time_offset_s, dtype=np.float64).reshape(n)
         code = _TIME_ENCODINGS[time_encoding]
         columns[time_field] = (code, np.round(t * 1e9) if code == "u4" else t)
-    order = list(field_order) if field_order is not None else list(columns)
-    if sorted(order) != sorted(columns):
-        raise InputError(f"The 'field_order' argument of encode_pointcloud2 must list the fields "
-                         f"{sorted(columns)}. Got {order} instead.")
+    return columns
+
+
+def _packed_rows(columns: dict[str, tuple[str, np.ndarray]], order: list[str], big_endian: bool, height: int,
+                 width: int, field_gap_bytes: int, point_padding_bytes: int,
+                 row_padding_bytes: int) -> tuple[dict[str, int], int, int, np.ndarray]:
+    """The fields packed in ``order`` with the gaps and paddings asked for: ``(offset per field, point_step,
+    row_step, data (height, row_step) uint8)``."""
+    n = height * width
     bo = ">" if big_endian else "<"
     offsets, offset = {}, 0
     for name in order:
@@ -113,10 +138,4 @@ def encode_pointcloud2(
     row_step = point_step * width + row_padding_bytes
     data = np.zeros((height, row_step), dtype=np.uint8)
     data[:, : point_step * width] = points.view(np.uint8).reshape(height, point_step * width)
-    ts = typestore if typestore is not None else default_typestore()
-    PointField = ts.types["sensor_msgs/msg/PointField"]
-    fields = [PointField(name=k, offset=offsets[k], datatype=_DATATYPE_OF[columns[k][0]], count=1) for k in order]
-    return ts.types["sensor_msgs/msg/PointCloud2"](
-        header=ros_header(ts, stamp_ns, frame_id), height=height, width=width, fields=fields,
-        is_bigendian=bool(big_endian), point_step=point_step, row_step=row_step, data=data.reshape(-1),
-        is_dense=bool(np.isfinite(pts).all()))
+    return offsets, point_step, row_step, data

@@ -25,15 +25,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ...cloud import PointCloud
+from ...cloud import POINT_TIME_FIELDS, PointCloud
 from ...errors import BagError
 
-__all__ = ["DATATYPES", "TIME_FIELDS", "PointCloud2Data", "decode_pointcloud2", "encode_pointcloud2"]
+__all__ = ["DATATYPES", "PointCloud2Data", "decode_pointcloud2", "encode_pointcloud2"]
 
 #: ``sensor_msgs/PointField`` datatype constant -> numpy type code (byte order added per message).
 DATATYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
-#: Names of per-point time fields, in order of preference.
-TIME_FIELDS = ("t", "time", "timestamp", "time_offset", "offset_time")
 _XYZ = ("x", "y", "z")
 
 
@@ -228,7 +226,7 @@ def _extract(grid: np.ndarray | None, named: dict[str, tuple[int, str, int]], he
            else np.zeros((height, width, 3)))
     valid = np.isfinite(xyz).all(axis=-1)
     keep = valid.reshape(-1)
-    time_field = next((n for n in TIME_FIELDS if n in named), None)
+    time_field = next((n for n in POINT_TIME_FIELDS if n in named), None)
     time_s = intensity = None
     if time_field is not None:
         time_s = _time_offsets_s(_first(grid[time_field]).reshape(-1)[keep], stamp_ns)

@@ -39,6 +39,8 @@ import numpy as np
 
 from ...errors import SemslamError, SlamError
 from ..messages import Attitude, Depth, Dvl, Scan
+from .live_health import LogTally, live_health
+from .live_prediction import Prediction, carry_forward, session_attitude
 from .timing import FifoSlot, LatestSlot, ReorderBuffer
 
 __all__ = ["LiveSlam", "Prediction", "ScanJob", "live_health"]
@@ -67,20 +69,6 @@ class ScanJob:
     @property
     def end_s(self) -> float:
         return self.scan.end_stamp_s
-
-
-@dataclass(frozen=True, eq=False)
-class Prediction:
-    """The filter's state carried to ``stamp_s`` (world NED, body FRD); ``horizon_s``: how far from the filter."""
-
-    stamp_s: float
-    position_ned_m: np.ndarray
-    position_cov_m2: np.ndarray
-    rpy_rad: np.ndarray
-    attitude_cov_world_rad2: np.ndarray | None
-    velocity_body_mps: np.ndarray
-    velocity_cov: np.ndarray
-    horizon_s: float
 
 
 class LiveSlam:
@@ -152,7 +140,7 @@ class LiveSlam:
                                       "scans_late": 0, "empty_scans": 0, "recognition_errors": 0,
                                       "navigation_errors": 0, "last_error": "", "scan_latency_s": [], "held_max": 0}
         self._closed = self._finished = False
-        self.health_tally = _LogTally()  # live_health's running tally of the session's log
+        self.health_tally = LogTally()  # live_health's running tally of the session's log
         self._worker = threading.Thread(target=self._work, name="semslam-recognition", daemon=True)
         self._worker.start()
 
@@ -347,9 +335,8 @@ class LiveSlam:
         (the AHRS is the filter's input): the filter's velocity, replaced by each valid DVL sample received since
         (in the body frame through the DVL's mounting; dead reckoning over the runner's delay line), the covariance
         grows by ``dt^2`` times the rotated filter velocity covariance. No depth, fix or landmark update after the
-        filter's time is in it: they come with the filter's state."""
-        from ...geometry import rotation_from_rpy
-
+        filter's time is in it: they come with the filter's state
+        (:func:`~semslam.run.ros1.live_prediction.carry_forward`)."""
         s = self.session
         if s is None or s.ekf is None:
             return None
@@ -358,32 +345,7 @@ class LiveSlam:
         self._recent_dvl = [d for d in self._recent_dvl if d[0] > ts - 1e-9]
         if t < ts:
             return None
-        ekf = s.ekf
-        p, v = ekf.position_ned_m.copy(), ekf.velocity_body_mps.copy()
-        v_filter = v.copy()
-        bias = ekf.yaw_bias_rad()
-        prev, rpy, R = ts, None, None
-        dvl = sorted(self._recent_dvl, key=lambda x: x[0])
-        k = 0
-        for ti, a in sorted(self._recent_attitude, key=lambda x: x[0]):
-            if ti > t:
-                break
-            while k < len(dvl) and dvl[k][0] <= prev:  # the newest DVL sample at the interval's start
-                v = s.dvl.body_velocity(dvl[k][1])
-                k += 1
-            rpy = a.copy()
-            rpy[2] -= bias
-            R = rotation_from_rpy(*rpy)
-            p += R @ v * (ti - prev)
-            prev = ti
-        att_rpy, att_cov = self.attitude_now()
-        if rpy is None:
-            rpy, R = att_rpy, rotation_from_rpy(*att_rpy)
-        else:
-            rpy[2] = (rpy[2] + np.pi) % (2 * np.pi) - np.pi
-        dt = t - ts
-        P = ekf.position_cov_m2 + dt * dt * (R @ ekf.velocity_cov @ R.T)
-        return Prediction(t, p, P, rpy, att_cov, v if k else v_filter, ekf.velocity_cov.copy(), dt)
+        return carry_forward(s, t, self._recent_attitude, self._recent_dvl)
 
     def estimate(self):
         """The runner's :class:`~semslam.slam.results.SlamEstimate` of the published mode (None before the start)."""
@@ -393,11 +355,7 @@ class LiveSlam:
     def attitude_now(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The published filter's attitude (rpy NED, yaw-bias corrected) at its current time and its world
         covariance."""
-        s = self.session
-        rpy, f = s.attitude.at(s.t)
-        rpy = np.array(rpy, dtype=float)
-        rpy[2] = (rpy[2] - s.ekf.yaw_bias_rad() + np.pi) % (2 * np.pi) - np.pi
-        return rpy, s.attitude.cov_world(rpy, f)
+        return session_attitude(self.session)
 
     def queue_state(self) -> dict:
         """Scans waiting or in recognition, navigation held behind them, the reorder buffer's length, the runner's
@@ -436,59 +394,3 @@ class LiveSlam:
                 return None
             return self.runner.finish()
 
-
-# ---------------------------------------------------------------------------------------------- health
-@dataclass
-class _LiveResult:
-    """The part of a :class:`~semslam.slam.SlamResult` :func:`semslam.run.health.health_verdict` reads, from a
-    session still running."""
-
-    mode: str
-    metrics: dict
-    landmarks: list
-    position_cov_m2: np.ndarray
-
-
-@dataclass
-class _LogTally:
-    n: int = 0
-    counts: dict = field(default_factory=dict)
-    nis: dict = field(default_factory=dict)  # kind -> [sum, n, dof]
-
-
-def live_health(live: LiveSlam):
-    """The health verdict (:func:`semslam.run.health.health_verdict`) of the published mode's session as it is now:
-    its update log tallied incrementally (gates, NIS, landmark updates), its landmarks and covariance, the runner's
-    counts and the reorder window's drops. Call with ``live.lock`` held; None before the start."""
-    from ...slam.consistency import chi2_band
-    from ..health import health_verdict
-
-    s = live.session
-    if s is None or s.ekf is None:
-        return None
-    tally = live.health_tally
-    c = tally.counts
-    for r in s.log[tally.n:]:
-        kind, ok = r.get("kind", ""), bool(r.get("accepted"))
-        key = kind if not kind.endswith("_beyond_attitude") else "beyond_attitude"
-        c[key] = c.get(key, 0) + 1
-        if not ok:
-            c[key + "_rejected"] = c.get(key + "_rejected", 0) + 1
-        if kind == "landmark" and ok:
-            c["landmark_" + str(r.get("test"))] = c.get("landmark_" + str(r.get("test")), 0) + 1
-        if ok and "nis" in r and np.isfinite(r["nis"]):
-            k = kind if kind != "landmark" else f"landmark_{r['test']}_{r['dof']}dof"
-            acc = tally.nis.setdefault(k, [0.0, 0, int(r["dof"])])
-            acc[0] += float(r["nis"])
-            acc[1] += 1
-    tally.n = len(s.log)
-    metrics = {"dvl_updates": c.get("dvl", 0), "dvl_rejected": c.get("dvl_rejected", 0),
-               "depth_updates": c.get("depth", 0), "depth_rejected": c.get("depth_rejected", 0),
-               "fix_updates": c.get("fix", 0), "fix_rejected": c.get("fix_rejected", 0),
-               "fix_unusable": c.get("fix_unusable", 0), "skipped_beyond_attitude": c.get("beyond_attitude", 0),
-               "landmark_updates": {"pose": c.get("landmark_pose", 0), "position": c.get("landmark_position", 0)},
-               "nis": {k: {"n": n, "dof": dof, "mean": tot / n, "band": list(chi2_band(dof, n))}
-                       for k, (tot, n, dof) in tally.nis.items() if n}}
-    est = s.estimate()
-    counts = dict(live.runner.counts, late_dropped=live.dropped_late)
-    return health_verdict(_LiveResult(live.mode, metrics, est.landmarks, est.position_cov_m2[None]), counts=counts)

@@ -1,4 +1,6 @@
-"""The ROS 1 node ``semslam``: live topics in, the SLAM estimate out (the only module that imports rospy).
+"""The ROS 1 node ``semslam``: live topics in, the SLAM estimate out (the only module that imports rospy; its topics,
+the ROS messages it publishes and its diagnostics: :mod:`~semslam.run.ros1.node_topics`,
+:mod:`~semslam.run.ros1.node_diagnostics`).
 
 Inputs: the topic map's topics, subscribed with ``rospy.AnyMsg`` and decoded from their serialized bytes by
 :class:`~semslam.run.ros1.decode.LiveDecoder` (rosbags, the bag reader's decoders). Outputs (frames: REP-105,
@@ -22,7 +24,6 @@ by :func:`semslam.run.dive.write_outcome`, the same layout as ``semslam run``.
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -30,15 +31,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ...dataset.rosbag import TopicMap
 from ...dataset.vehicle import VehicleDescription
 from ...errors import BagError, SemslamError
 from .bridge import RosUnavailableError, ensure_rospy
-from .convert import landmark_markers, odometry_spec
 from .decode import LiveDecoder
-from .live import LiveSlam, live_health
+from .live import LiveSlam
+from .node_diagnostics import percentiles
+from .node_topics import NodeTopics, check_advertised_types
 
 __all__ = ["LiveDive", "NodeSummary", "run_node"]
 
@@ -76,317 +76,6 @@ def _load_db(db: Any):
         return load_database(db)
     raise SemslamError(f"The 'db' argument of run_node must be a database path (.npz) or a ViewDatabase. Got "
                        f"{type(db).__name__} instead.")
-
-
-def _percentiles(values: list[float]) -> tuple[float, float]:
-    if not values:
-        return float("nan"), float("nan")
-    a = np.asarray(values, dtype=float)
-    return float(np.percentile(a, 50)), float(np.percentile(a, 90))
-
-
-class _Node:
-    """Publishers, subscribers and the diagnostics of one node run (rospy imported by :func:`run_node`)."""
-
-    def __init__(self, rospy, live: LiveSlam, decoder: LiveDecoder, *, map_frame: str, base_frame: str,
-                 path_period_s: float, silent_after_s: float, keep_newest_scan: bool = True) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from nav_msgs.msg import Odometry, Path as PathMsg
-        from tf2_msgs.msg import TFMessage
-        from visualization_msgs.msg import MarkerArray
-
-        self.rospy, self.live, self.decoder = rospy, live, decoder
-        self.map_frame, self.base_frame = map_frame, base_frame
-        self.path_period_s, self.silent_after_s = path_period_s, silent_after_s
-        self.pub_odom = rospy.Publisher("/semslam/odometry", Odometry, queue_size=50)
-        self.pub_filtered = rospy.Publisher("/semslam/odometry/filtered", Odometry, queue_size=50)
-        self._arrival_wall: float | None = None
-        self.pub_tf = rospy.Publisher("/tf", TFMessage, queue_size=50)
-        self.pub_path = rospy.Publisher("/semslam/path", PathMsg, queue_size=2, latch=True)
-        self.pub_markers = rospy.Publisher("/semslam/landmarks", MarkerArray, queue_size=5, latch=True)
-        self.pub_diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
-        from .detections_msg import detection_array_spec
-
-        self.pub_detections = rospy.Publisher("/semslam/detections", _raw_message_class(*detection_array_spec()),
-                                              queue_size=10)
-        self.scan_frame = "scanner"
-        self._detections_seq = 0
-        from .detections_msg import detection_array_bytes
-
-        detection_array_bytes(0, "", 0, [])  # builds rosbags' message classes now, not on the first scan
-        self.origin_ns: int | None = None
-        self.fatal: list[str] = []
-        self.errors: list[str] = []
-        self.last_msg_wall: dict[str, float] = {}
-        self.started_wall = time.monotonic()
-        self.path = PathMsg()
-        self.path.header.frame_id = map_frame
-        self._last_path_s = -math.inf
-        self.nav_latency_s: list[float] = []
-        self._landmarks_sig: tuple = ()
-        self._inbox: list = []
-        self.keep_newest_scan = keep_newest_scan
-        self.scans_dropped_inbox = 0
-        self._inbox_cond = threading.Condition()
-        self._stopping = False
-        self._dispatcher = threading.Thread(target=self._dispatch, name="semslam-dispatch", daemon=True)
-        self._dispatcher.start()
-        # rospy's own queues: a few scans (each may be megabytes), many navigation messages
-        self.subs = [rospy.Subscriber(t, rospy.AnyMsg, self._callback, callback_args=t,
-                                      queue_size=4 if decoder.kinds[t] == "scans" else 1000, buff_size=1 << 26)
-                     for t in decoder.topics]
-
-    # -- input
-    def _callback(self, msg, topic: str) -> None:
-        wall = time.monotonic()
-        self.last_msg_wall[topic] = wall
-        hdr = getattr(msg, "_connection_header", None) or {}
-        try:
-            now = self.rospy.get_rostime()
-            dec = self.decoder.decode(topic, hdr.get("type", ""), msg._buff, md5sum=hdr.get("md5sum", ""),
-                                      definition=hdr.get("message_definition", ""),
-                                      receive_ns=int(now.secs) * 1_000_000_000 + int(now.nsecs))
-        except BagError as err:
-            if "must have type" in str(err) or "not a ROS 1 Noetic type" in str(err):
-                self.fatal.append(str(err))
-                self.rospy.signal_shutdown(str(err))
-            elif len(self.errors) < 100:
-                self.errors.append(str(err))
-            return
-        if dec is None:
-            return
-        # the callback never waits for the filter's lock (held while a scan's detections and the navigation held
-        # behind it are fed): the dispatcher thread gives the messages to LiveSlam in arrival order
-        with self._inbox_cond:
-            if self.origin_ns is None:  # the whole second before the first message, as the bag reader takes it
-                self.origin_ns = dec.stamp_ns - dec.stamp_ns % 1_000_000_000
-            if dec.kind == "scan" and getattr(dec.payload, "frame_id", ""):
-                self.scan_frame = dec.payload.frame_id
-            if dec.kind == "scan" and self.keep_newest_scan:
-                # bounded memory when the filter falls behind: at most one scan waits here (the newest), as in
-                # the recognition queue; the older one is dropped and counted
-                waiting = [i for i, m in enumerate(self._inbox) if m[1] == "scan"]
-                for i in reversed(waiting):
-                    del self._inbox[i]
-                    self.scans_dropped_inbox += 1
-            self._inbox.append(((dec.stamp_ns - self.origin_ns) / 1e9, dec.kind, dec.payload, wall))
-            self._inbox_cond.notify()
-
-    def _dispatch(self) -> None:
-        while True:
-            with self._inbox_cond:
-                self._inbox_cond.wait_for(lambda: self._inbox or self._stopping)
-                if not self._inbox:
-                    return
-                batch, self._inbox = self._inbox, []
-            for t, kind, payload, wall in batch:
-                self._arrival_wall = wall
-                try:
-                    self.live.add(t, kind, payload, wall)
-                except Exception as err:  # noqa: BLE001 - one bad message must not leave the node deaf: counted
-                    if len(self.errors) < 100:
-                        self.errors.append(f"{kind} at {t:.3f} s: {type(err).__name__}: {err}")
-
-    def stop_dispatch(self) -> None:
-        """Give LiveSlam what the callbacks queued, then stop the dispatcher."""
-        with self._inbox_cond:
-            self._stopping = True
-            self._inbox_cond.notify()
-        self._dispatcher.join(60.0)
-
-    # -- output
-    def _stamp(self, t_s: float):
-        ns = int(self.origin_ns or 0) + int(round(t_s * 1e9))
-        return self.rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
-
-    def _odometry_msg(self, o):
-        from nav_msgs.msg import Odometry
-
-        m = Odometry()
-        m.header.stamp, m.header.frame_id, m.child_frame_id = self._stamp(o.stamp_s), self.map_frame, self.base_frame
-        p, q = m.pose.pose.position, m.pose.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in o.position_enu_m)
-        q.x, q.y, q.z, q.w = (float(v) for v in o.quat_xyzw)
-        m.pose.covariance = [float(v) for v in o.pose_covariance_6x6.reshape(-1)]
-        lin = m.twist.twist.linear
-        lin.x, lin.y, lin.z = (float(v) for v in o.velocity_flu_mps)
-        m.twist.covariance = [float(v) for v in o.twist_covariance_6x6.reshape(-1)]
-        return m
-
-    def on_detections(self, job, result, latency_s: float) -> None:
-        """A recognised scan's detections (all of them, reliable or not): /semslam/detections (worker thread)."""
-        from .detections_msg import detection_array_bytes
-
-        ns = int(self.origin_ns or 0) + int(round(job.end_s * 1e9))
-        self._detections_seq += 1
-        raw = detection_array_bytes(ns, self.scan_frame, job.scan_id, result.detections, seq=self._detections_seq)
-        try:
-            self.pub_detections.publish(self.pub_detections.data_class(raw))
-        except self.rospy.ROSException:  # shutting down
-            pass
-
-    def on_estimate(self, live: LiveSlam) -> None:
-        """The runner's estimate (lags the newest message by the reorder window, the runner's delay line and any hold
-        behind a scan in recognition): /semslam/odometry/filtered."""
-        s = live.session
-        if s is None or s.ekf is None:
-            return
-        rpy, att_cov = live.attitude_now()
-        ekf = s.ekf
-        o = odometry_spec(s.t, ekf.position_ned_m, ekf.position_cov_m2, rpy, att_cov, ekf.velocity_body_mps,
-                          ekf.velocity_cov)
-        try:
-            self.pub_filtered.publish(self._odometry_msg(o))
-        except self.rospy.ROSException:  # shutting down
-            pass
-
-    def on_prediction(self, live: LiveSlam, pr) -> None:
-        """The filter's state predicted to the newest attitude sample: /semslam/odometry, /tf, /semslam/path."""
-        from geometry_msgs.msg import PoseStamped, TransformStamped
-        from tf2_msgs.msg import TFMessage
-
-        o = odometry_spec(pr.stamp_s, pr.position_ned_m, pr.position_cov_m2, pr.rpy_rad, pr.attitude_cov_world_rad2,
-                          pr.velocity_body_mps, pr.velocity_cov)
-        m = self._odometry_msg(o)
-        tf = TransformStamped()
-        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = m.header.stamp, self.map_frame, self.base_frame
-        p, q = m.pose.pose.position, m.pose.pose.orientation
-        tr, rot = tf.transform.translation, tf.transform.rotation
-        tr.x, tr.y, tr.z = p.x, p.y, p.z
-        rot.x, rot.y, rot.z, rot.w = q.x, q.y, q.z, q.w
-        try:
-            self.pub_odom.publish(m)
-            self.pub_tf.publish(TFMessage(transforms=[tf]))
-            if self._arrival_wall is not None:
-                self.nav_latency_s.append(time.monotonic() - self._arrival_wall)
-                if len(self.nav_latency_s) > 2000:
-                    del self.nav_latency_s[:1000]
-            if o.stamp_s - self._last_path_s >= self.path_period_s:
-                self._last_path_s = o.stamp_s
-                ps = PoseStamped()
-                ps.header = m.header
-                ps.pose = m.pose.pose
-                self.path.poses.append(ps)
-                if len(self.path.poses) > 20000:  # bounded: every other pose of the older half
-                    self.path.poses = self.path.poses[:10000:2] + self.path.poses[10000:]
-                self.path.header.stamp = m.header.stamp
-                self.pub_path.publish(self.path)
-        except self.rospy.ROSException:  # shutting down
-            pass
-
-    def publish_landmarks(self, force: bool = False) -> None:
-        from visualization_msgs.msg import Marker, MarkerArray
-
-        est = self.live.estimate()
-        if est is None:
-            return
-        specs = landmark_markers(est.landmarks)
-        sig = tuple((lm.landmark_id, lm.n_updates) for lm in est.landmarks)
-        if sig == self._landmarks_sig and not force:
-            return
-        self._landmarks_sig = sig
-        stamp = self._stamp(est.stamp_s)
-        arr = MarkerArray()
-        for sp in specs:
-            mk = Marker()
-            mk.header.stamp, mk.header.frame_id = stamp, self.map_frame
-            mk.ns, mk.id, mk.type, mk.action, mk.text = sp.ns, sp.id, sp.type, sp.action, sp.text
-            mk.pose.position.x, mk.pose.position.y, mk.pose.position.z = (float(v) for v in sp.position_enu_m)
-            q = mk.pose.orientation
-            q.x, q.y, q.z, q.w = (float(v) for v in sp.quat_xyzw)
-            mk.scale.x, mk.scale.y, mk.scale.z = (float(v) for v in sp.scale)
-            mk.color.r, mk.color.g, mk.color.b, mk.color.a = sp.rgba
-            arr.markers.append(mk)
-        try:
-            self.pub_markers.publish(arr)
-        except self.rospy.ROSException:
-            pass
-
-    def diagnostics(self) -> tuple[int, str, dict]:
-        """(level, message, key/values): OK (0) / WARN (1) / ERROR (2)."""
-        live = self.live
-        now = time.monotonic()
-        with live.lock:
-            st = dict(live.stats)
-            q = live.queue_state()
-            late = live.dropped_late
-            started = live.session is not None
-            verdict = live_health(live) if started else None
-        silent = [t for t in self.decoder.topics
-                  if now - self.last_msg_wall.get(t, self.started_wall) > self.silent_after_s]
-        p50, p90 = _percentiles(st["scan_latency_s"])
-        n50, n90 = _percentiles(self.nav_latency_s)
-        kv = {"started": started, "messages": st["messages"], "dropped_late": late,
-              "scans_recognised": st["scans_recognised"],
-              "scans_dropped": st["scans_dropped"] + self.scans_dropped_inbox,
-              "scans_late": st["scans_late"], "detections_late": late.get("detections", 0),
-              "recognition_errors": st["recognition_errors"], "navigation_errors": st["navigation_errors"],
-              "scan_latency_p50_ms": 1e3 * p50, "scan_latency_p90_ms": 1e3 * p90,
-              "navigation_latency_p50_ms": 1e3 * n50, "navigation_latency_p90_ms": 1e3 * n90,
-              **q, "silent_topics": silent, "decode_errors": len(self.errors),
-              "verdict": verdict.level if verdict is not None else "not started",
-              "health": verdict.as_dict()["checks"] if verdict is not None else []}
-        if self.fatal:
-            return 2, self.fatal[-1], kv
-        problems = []
-        if verdict is not None and verdict.level == "bad":
-            return 2, "; ".join(verdict.lines()), kv
-        if verdict is not None:
-            problems += verdict.lines()
-        if silent:
-            problems.append(f"no message for {self.silent_after_s:g} s on {', '.join(silent)}")
-        nav_late = sum(v for k, v in late.items() if k not in ("scan", "detections"))
-        if nav_late or st["navigation_errors"]:
-            problems.append(f"{nav_late + st['navigation_errors']} navigation message(s) dropped")
-        if st["recognition_errors"]:
-            problems.append(f"{st['recognition_errors']} scan(s) failed recognition")
-        if problems:
-            return 1, "; ".join(problems), kv
-        return 0, "OK", kv
-
-    def publish_diagnostics(self) -> None:
-        import json
-
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-
-        level, text, kv = self.diagnostics()
-        arr = DiagnosticArray()
-        arr.header.stamp = self.rospy.get_rostime()
-        status = DiagnosticStatus(level=level, name="semslam: SLAM", message=text, hardware_id="semslam")
-        status.values = [KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(v)) for k, v in kv.items()]
-        arr.status = [status]
-        try:
-            self.pub_diag.publish(arr)
-        except self.rospy.ROSException:
-            pass
-
-    def check_topic_types(self) -> None:
-        """A mapped topic already advertised by someone with a type the topic map's sensor does not accept:
-        fatal, naming the topic (before any message comes)."""
-        try:
-            published = dict(self.rospy.get_published_topics())
-        except Exception:  # noqa: BLE001 - the master is going away: the main loop notices
-            return
-        for topic in self.decoder.topics:
-            if topic in published and published[topic] not in ("*", ""):
-                try:
-                    self.decoder.check_type(topic, published[topic])
-                except BagError as err:
-                    if "must have type" in str(err):
-                        self.fatal.append(str(err))
-                        self.rospy.signal_shutdown(str(err))
-
-
-def _check_advertised_types(rosgraph, decoder: LiveDecoder) -> None:
-    """:class:`BagError` naming a mapped topic that someone already publishes with a type its sensor does not
-    accept (the master's topic types)."""
-    try:
-        types = dict(rosgraph.Master("/semslam").getTopicTypes())
-    except Exception:  # noqa: BLE001 - the master went away: run_node's loop notices
-        return
-    for topic in decoder.topics:
-        if types.get(topic) not in (None, "*", ""):
-            decoder.check_type(topic, types[topic])
 
 
 def run_node(db: Any, topic_map: TopicMap, vehicle: VehicleDescription, *, mode: str = "pose", modes=None,
@@ -437,13 +126,49 @@ def run_node(db: Any, topic_map: TopicMap, vehicle: VehicleDescription, *, mode:
         A mapped topic has a type its sensor does not accept, naming the topic: at once when the master already
         knows the topic's type, else when its first message comes (then after shutdown).
     """
+    _check_node_inputs(topic_map, vehicle)
+    decoder = LiveDecoder(topic_map, vehicle)
+    survey, origin, origin_from = _prior_map(prior_map, topic_map)
+    rospy, uri = _connect_to_master(decoder)  # fail fast, before the database is loaded
+    database = _load_db(db)
+    run_modes = (mode,) if modes is None else tuple(modes)
+    recognizer = _warm_recognizer(database, topic_map, run_modes, pipeline_config, seed)
+    blas_limit = _one_blas_thread()
+    box: dict[str, NodeTopics] = {}
+    live = LiveSlam(vehicle, recognizer, mode=mode, modes=run_modes, config=config, symmetries=database.symmetries(),
+                    backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
+                    up_from_attitude=up_from_attitude, geodetic_origin=origin, reorder_window_s=reorder_window_s,
+                    max_hold_s=max_hold_s, scan_queue=scan_queue, **_forward_to_node(box))
+    if origin_from is not None:
+        live.geodetic_origin_from = origin_from
+    live.warm_up()  # before subscribing: the filter's first start must not stall the odometry
+    node = box["node"] = _open_node(rospy, live, decoder, node_name, map_frame=map_frame, base_frame=base_frame,
+                                    path_period_s=path_period_s, silent_after_s=silent_after_s,
+                                    keep_newest_scan=scan_queue == "newest")
+    if ready is not None:
+        ready.set()
+    _spin(rospy, node, diagnostics_period_s)
+    outcome, stats = _stop(node, live, blas_limit)
+    written, payload = None, None
+    if out_dir is not None and outcome is not None:
+        dive = _live_dive(vehicle, topic_map, live, node, node_name, uri, survey)
+        written, payload = _write_run(Path(out_dir), outcome, live, dive, overwrite, node, recognizer, seed,
+                                      resolved_config)
+    result = None if outcome is None else outcome.results.get(mode)
+    return NodeSummary(outcome, result, stats, written, list(node.errors), payload)
+
+
+def _check_node_inputs(topic_map: Any, vehicle: Any) -> None:
     if not isinstance(topic_map, TopicMap):
         raise SemslamError(f"The 'topic_map' argument of run_node must be a TopicMap. Got {type(topic_map).__name__}.")
     if not isinstance(vehicle, VehicleDescription):
         raise SemslamError(f"The 'vehicle' argument of run_node must be a VehicleDescription. Got "
                            f"{type(vehicle).__name__}.")
-    decoder = LiveDecoder(topic_map, vehicle)
-    survey, origin, origin_from = _prior_map(prior_map, topic_map)
+
+
+def _connect_to_master(decoder: LiveDecoder):
+    """``(rospy, ROS_MASTER_URI)`` once a ROS master answers and no mapped topic is already advertised with a type
+    its sensor does not accept (:class:`RosUnavailableError`, :class:`BagError`)."""
     ensure_rospy()
     import rosgraph
     import rospy
@@ -452,39 +177,48 @@ def run_node(db: Any, topic_map: TopicMap, vehicle: VehicleDescription, *, mode:
     if not rosgraph.is_master_online():
         raise RosUnavailableError(f"No ROS master answers at ROS_MASTER_URI={uri}: start roscore (or set "
                                   "ROS_MASTER_URI).")
-    _check_advertised_types(rosgraph, decoder)  # fail fast, before the database is loaded
+    check_advertised_types(rosgraph, decoder)
+    return rospy, uri
+
+
+def _warm_recognizer(database: Any, topic_map: TopicMap, run_modes: tuple, pipeline_config: Any, seed: int):
+    """The scan recognizer, warmed up (None without scans or when every mode is dead reckoning)."""
     from ...pipeline import ScanRecognizer
 
-    database = _load_db(db)
-    run_modes = (mode,) if modes is None else tuple(modes)
     recognizer = None
     if topic_map.scans is not None and any(m != "dr" for m in run_modes):
         recognizer = ScanRecognizer(database, pipeline_config, seed=seed)
         recognizer.warm_up()
+    return recognizer
+
+
+def _one_blas_thread():
+    """One BLAS thread for the node's life (the filter's matrices are small; recognition and the filter share two
+    cores with the vehicle's other processes), set once: never toggled while the other thread is inside BLAS.
+    Returns the limiter (``restore_original_limits()`` at the end)."""
     from threadpoolctl import threadpool_limits
 
-    # one BLAS thread for the node's life (the filter's matrices are small; recognition and the filter share two
-    # cores with the vehicle's other processes), set once: never toggled while the other thread is inside BLAS
-    blas_limit = threadpool_limits(limits=1, user_api="blas")
-    box: dict[str, _Node] = {}
-    live = LiveSlam(vehicle, recognizer, mode=mode, modes=run_modes, config=config, symmetries=database.symmetries(),
-                    backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
-                    up_from_attitude=up_from_attitude, geodetic_origin=origin,
-                    reorder_window_s=reorder_window_s, max_hold_s=max_hold_s, scan_queue=scan_queue,
-                    on_estimate=lambda lv: box["node"].on_estimate(lv) if "node" in box else None,
-                    on_prediction=lambda lv, pr: box["node"].on_prediction(lv, pr) if "node" in box else None,
-                    on_detections=lambda job, res, lat: box["node"].on_detections(job, res, lat)
-                    if "node" in box else None)
-    if origin_from is not None:
-        live.geodetic_origin_from = origin_from
-    live.warm_up()  # before subscribing: the filter's first start must not stall the odometry
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _forward_to_node(box: dict) -> dict:
+    """LiveSlam's callbacks, forwarded to the node's topics (``box["node"]``) once they exist."""
+    return dict(on_estimate=lambda lv: box["node"].on_estimate(lv) if "node" in box else None,
+                on_prediction=lambda lv, pr: box["node"].on_prediction(lv, pr) if "node" in box else None,
+                on_detections=lambda job, res, lat: box["node"].on_detections(job, res, lat)
+                if "node" in box else None)
+
+
+def _open_node(rospy, live: LiveSlam, decoder: LiveDecoder, node_name: str, **topics_kw) -> NodeTopics:
+    """``rospy.init_node`` (signals handled by rospy only on the main thread), then the node's topics."""
     main_thread = threading.current_thread() is threading.main_thread()
     rospy.init_node(node_name, anonymous=False, disable_signals=not main_thread)
-    node = _Node(rospy, live, decoder, map_frame=map_frame, base_frame=base_frame, path_period_s=path_period_s,
-                 silent_after_s=silent_after_s, keep_newest_scan=scan_queue == "newest")
-    box["node"] = node
-    if ready is not None:
-        ready.set()
+    return NodeTopics(rospy, live, decoder, **topics_kw)
+
+
+def _spin(rospy, node: NodeTopics, diagnostics_period_s: float) -> None:
+    """Until rospy shuts down: every ``diagnostics_period_s`` the advertised types checked, the landmarks and the
+    diagnostics published."""
     next_diag = time.monotonic()
     try:
         while not rospy.is_shutdown():
@@ -496,6 +230,11 @@ def run_node(db: Any, topic_map: TopicMap, vehicle: VehicleDescription, *, mode:
                 node.publish_diagnostics()
     except KeyboardInterrupt:  # disable_signals: the caller's Ctrl-C
         rospy.signal_shutdown("KeyboardInterrupt")
+
+
+def _stop(node: NodeTopics, live: LiveSlam, blas_limit) -> tuple[Any, dict]:
+    """Unsubscribe, give LiveSlam what is queued, finish the runner: ``(outcome, stats)``; :class:`BagError` when a
+    mapped topic had a type its sensor does not accept."""
     for sub in node.subs:
         sub.unregister()
     node.stop_dispatch()
@@ -505,19 +244,19 @@ def run_node(db: Any, topic_map: TopicMap, vehicle: VehicleDescription, *, mode:
     stats = dict(live.stats, dropped_late=live.dropped_late, navigation_latency_s=list(node.nav_latency_s))
     if node.fatal:
         raise BagError(node.fatal[0])
-    written, payload = None, None
-    if out_dir is not None and outcome is not None:
-        geo = live.geodetic_origin
-        meta = {"source": {"kind": "ros1", "node": node_name, "master": uri, "topics": "given", "vehicle": "given",
-                           "prior_map": None if survey is None else survey.source},
-                "topics": topic_map.to_toml(), "time_origin_ns": int(node.origin_ns or 0)}
-        if geo is not None:
-            meta["geodetic_origin_from"] = live.geodetic_origin_from
-        dive = LiveDive(vehicle, meta, geo)
-        written, payload = _write_run(Path(out_dir), outcome, live, dive, overwrite, node, recognizer, seed,
-                                      resolved_config)
-    result = None if outcome is None else outcome.results.get(mode)
-    return NodeSummary(outcome, result, stats, written, list(node.errors), payload)
+    return outcome, stats
+
+
+def _live_dive(vehicle: VehicleDescription, topic_map: TopicMap, live: LiveSlam, node: NodeTopics, node_name: str,
+               uri: str, survey: Any) -> LiveDive:
+    """The dive's provenance for the run directory (:class:`LiveDive`)."""
+    geo = live.geodetic_origin
+    meta = {"source": {"kind": "ros1", "node": node_name, "master": uri, "topics": "given", "vehicle": "given",
+                       "prior_map": None if survey is None else survey.source},
+            "topics": topic_map.to_toml(), "time_origin_ns": int(node.origin_ns or 0)}
+    if geo is not None:
+        meta["geodetic_origin_from"] = live.geodetic_origin_from
+    return LiveDive(vehicle, meta, geo)
 
 
 def _prior_map(prior_map: Any, topic_map: TopicMap):
@@ -539,7 +278,7 @@ def _prior_map(prior_map: Any, topic_map: TopicMap):
     return survey, origin, origin_from
 
 
-def _write_run(out: Path, outcome: Any, live: LiveSlam, dive: LiveDive, overwrite: bool, node: "_Node",
+def _write_run(out: Path, outcome: Any, live: LiveSlam, dive: LiveDive, overwrite: bool, node: NodeTopics,
                recognizer: Any, seed: int, resolved_config: Any) -> tuple[Path, dict]:
     """The run directory of ``semslam run`` (:func:`semslam.run.dive.write_outcome`; no mission copy: the scans
     were not stored) plus ``ros_node.json``: the node's counters and wall-clock latencies (kept out of run.json,
@@ -557,8 +296,8 @@ def _write_run(out: Path, outcome: Any, live: LiveSlam, dive: LiveDive, overwrit
 
             write_resolved_config(resolved_config, tmp)
         stats = {k: v for k, v in live.stats.items() if k != "scan_latency_s"}
-        s50, s90 = _percentiles(live.stats["scan_latency_s"])
-        n50, n90 = _percentiles(node.nav_latency_s)
+        s50, s90 = percentiles(live.stats["scan_latency_s"])
+        n50, n90 = percentiles(node.nav_latency_s)
         latency = {"scan_to_detections_p50_ms": 1e3 * s50, "scan_to_detections_p90_ms": 1e3 * s90,
                    "navigation_to_odometry_p50_ms": 1e3 * n50, "navigation_to_odometry_p90_ms": 1e3 * n90}
         (tmp / "ros_node.json").write_text(json.dumps({"stats": stats, "dropped_late": live.dropped_late,
@@ -566,29 +305,6 @@ def _write_run(out: Path, outcome: Any, live: LiveSlam, dive: LiveDive, overwrit
                                                        "time_origin_ns": int(node.origin_ns or 0)},
                                                       indent=1, default=str))
     return out, payload
-
-
-def _raw_message_class(ros_type: str, md5sum: str, full_text: str):
-    """A rospy message class whose instances carry bytes already serialized (rosbags) for ``ros_type``: what a
-    publisher of a type without genmsg-generated Python classes hands rospy."""
-    import genpy
-
-    class RawMessage(genpy.Message):
-        __slots__ = ["_buff"]
-        _type, _md5sum, _full_text, _has_header = ros_type, md5sum, full_text, False
-        _slot_types: list = []
-
-        def __init__(self, buff: bytes = b"") -> None:
-            self._buff = buff
-
-        def serialize(self, buff) -> None:
-            buff.write(self._buff)
-
-        def deserialize(self, data):
-            self._buff = bytes(data)
-            return self
-
-    return RawMessage
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,10 +27,10 @@ import gtsam
 import numpy as np
 
 from ...errors import SlamError
+from ...modes import GRAPH_BACKENDS as BACKENDS
 from . import factors as fac
 from .segment import SegmentAccumulator
 
-BACKENDS = ("isam2", "batch")
 
 
 class GraphBackend:

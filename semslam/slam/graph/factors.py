@@ -142,21 +142,37 @@ def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarra
     m = noise_cov.shape[0]
     rot_rows = which == "pose" and m > 3
     if orientation_innovation != "rotvec" and rot_rows:
-        stub = _Stub(n_v, yaw_bias, i_yaw)
+        err = _rpy_form_error(kx, kl, meas, R_ahrs, which, n_v=n_v, yaw_bias=yaw_bias, i_yaw=i_yaw,
+                              orientation_innovation=orientation_innovation)
+    else:
+        err = _rotvec_form_error(kx, kl, meas, R_ahrs, m, rot_rows, n_v=n_v, yaw_bias=yaw_bias, i_yaw=i_yaw,
+                                 yaw_bias_lin=yaw_bias_lin)
+    f = gtsam.CustomFactor(noise, [kx, kl], err)
+    return f if linearize_at is None else linearized(f, linearize_at)
 
-        def err_generic(this, values, H):
-            stub.x[:n_v] = values.atVector(kx)
-            stub.x[n_v:] = values.atVector(kl)
-            inn = innovation(stub, 0, meas, R_ahrs, None, orientation_innovation=orientation_innovation)
-            Hc, nu, _ = inn.rows(which)
-            if H is not None:
-                H[0] = np.ascontiguousarray(Hc[:, :n_v])
-                H[1] = np.ascontiguousarray(Hc[:, n_v:])
-            return -nu
 
-        f = gtsam.CustomFactor(noise, [kx, kl], err_generic)
-        return f if linearize_at is None else linearized(f, linearize_at)
+def _rpy_form_error(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarray, which: str, *, n_v: int,
+                    yaw_bias: bool, i_yaw: int, orientation_innovation: str):
+    """The error function of :func:`landmark_factor` in a form other than ``rotvec``: through :func:`innovation`."""
+    stub = _Stub(n_v, yaw_bias, i_yaw)
 
+    def err_generic(this, values, H):
+        stub.x[:n_v] = values.atVector(kx)
+        stub.x[n_v:] = values.atVector(kl)
+        inn = innovation(stub, 0, meas, R_ahrs, None, orientation_innovation=orientation_innovation)
+        Hc, nu, _ = inn.rows(which)
+        if H is not None:
+            H[0] = np.ascontiguousarray(Hc[:, :n_v])
+            H[1] = np.ascontiguousarray(Hc[:, n_v:])
+        return -nu
+
+    return err_generic
+
+
+def _rotvec_form_error(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarray, m: int, rot_rows: bool, *,
+                       n_v: int, yaw_bias: bool, i_yaw: int, yaw_bias_lin: float):
+    """The error function of :func:`landmark_factor` in the ``rotvec`` form (``m`` rows; the rotation rows with
+    ``rot_rows``), evaluated here directly, in the observed basis at the filter's yaw bias ``yaw_bias_lin``."""
     z_p, R_vo, U = meas.p_vehicle_object_m, meas.R_vehicle_object, meas.unobservable_axes_vehicle
     ez = np.array([0.0, 0.0, 1.0])
 
@@ -202,8 +218,7 @@ def landmark_factor(kx: int, kl: int, meas: ObjectMeasurement, R_ahrs: np.ndarra
             H[0], H[1] = Hx, Hl
         return e
 
-    f = gtsam.CustomFactor(noise, [kx, kl], err)
-    return f if linearize_at is None else linearized(f, linearize_at)
+    return err
 
 
 def landmark_init_factor(kx: int, kl: int, pose0: np.ndarray, G: np.ndarray, x_lin: np.ndarray, cov: np.ndarray,
