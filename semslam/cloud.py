@@ -11,6 +11,11 @@ from ._validation import as_float_array
 from .errors import InputError
 
 
+#: names of a per-point time field, in order of preference: seconds from the scan's start in a mission directory,
+#: the field names drivers use in a PointCloud2 (decoded to seconds by :mod:`semslam.io.ros.pointcloud2`)
+POINT_TIME_FIELDS = ("t", "time", "timestamp", "time_offset", "offset_time", "time_offset_s")
+
+
 @dataclass(frozen=True, eq=False)
 class PointCloud:
     """An unorganised 3-D point cloud, validated on construction.

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from ..modes import BACKENDS
 
-BACKENDS = ("ekf", "isam2", "batch")  #: as `semslam run --backend`
 
 
 def register(subparsers, common) -> None:

@@ -6,6 +6,7 @@ library call is :func:`semslam.run.dive.run_dive`."""
 from __future__ import annotations
 
 import argparse
+from ..modes import BACKENDS
 
 #: exit status of ``--strict`` when the run's verdict is bad (distinct from 1, an error)
 EXIT_BAD_VERDICT = 3
@@ -33,7 +34,7 @@ def register(subparsers, common) -> None:
                                                     "in the same world frame")
     p.add_argument("--mode", help="SLAM mode: dr, position, pose, pose+heading or all (default; or --config's)")
     p.add_argument("--seed", type=int, help="seed of recognition (default 0, or --config's)")
-    p.add_argument("--backend", choices=("ekf", "isam2", "batch"),
+    p.add_argument("--backend", choices=BACKENDS,
                    help="SLAM estimator: the EKF (default), or a GTSAM factor graph: isam2 (online) or batch")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     p.add_argument("--strict", action="store_true",

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from ..modes import BACKENDS, MODES
 
 
-#: the filter modes (semslam.slam.MODES, spelled out: importing semslam.slam to build the parser costs 0.4 s on
-#: every command; tests/test_cli_main.py checks they agree) and "all"
-MODE_CHOICES = ("dr", "position", "pose", "pose+heading", "all")
-BACKEND_CHOICES = ("ekf", "isam2", "batch")
+#: the filter modes (:mod:`semslam.modes`, a light module) and "all"
+MODE_CHOICES = (*MODES, "all")
+BACKEND_CHOICES = BACKENDS
 
 
 def register(subparsers, common) -> None:
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..run.config import write_resolved_config
     from ..io.detections import read_detections_jsonl
-    from ..run import run_slam
+    from ..run.dive import slam_dive
     from ..run.rundir import write_run
     from ..run.rundir import mode_dir
     from ._inputs import load_dataset, run_config_from_args
@@ -117,17 +117,15 @@ def run(args: argparse.Namespace) -> int:
     with staged_output_dir(final, overwrite=args.overwrite,
                            inputs=(args.mission, args.detections, args.config, args.vehicle, args.db,
                                    args.survey)) as out:
-        for mode in modes:
-            if dets is None:
-                from ..experiments.montecarlo import truth_run
+        if dets is None:  # detections drawn from the simulator's truth (experiments): one run per mode
+            from ..simulation.truth_slam import run_truth_slam
 
-                from ..simulation.truth_slam import run_truth_slam
-
-                res = run_truth_slam(mission, mode=mode, config=cfg, seed=rc.run.seed, backend=rc.run.backend,
-                                     surveyed=tuple(args.surveyed))
-            else:
-                res = run_slam(mission, dets, mode=mode, config=cfg, symmetries=symmetries, backend=rc.run.backend,
-                               survey=survey)
+            results = {mode: run_truth_slam(mission, mode=mode, config=cfg, seed=rc.run.seed, backend=rc.run.backend,
+                                            surveyed=tuple(args.surveyed)) for mode in modes}
+        else:  # the runner of `semslam run`, every mode in one pass (semslam.run.dive.slam_dive)
+            results = slam_dive(mission, dets, modes=modes, config=cfg, symmetries=symmetries,
+                                backend=rc.run.backend, survey=survey)
+        for mode, res in results.items():
             where = mode_dir(out, mode) if len(modes) > 1 else out
             write_run(res, where)
             if args.export:

@@ -8,7 +8,8 @@ sub-command ``X`` defined by ``cmd_X.py`` builds only that module's parsers; hel
 modules with another name (``montecarlo`` in ``cmd_slam.py``) build them all.
 
 Errors: a :class:`~semslam.errors.SemslamError` prints one line ``semslam: error: ...`` on stderr and
-exits 1; a usage error exits 2 (argparse); anything else is a bug and keeps its traceback.
+exits 1; a usage error exits 2 (argparse); a Ctrl-C at any moment prints ``semslam: interrupted`` and exits 130
+(:func:`console`); anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import gc
 import os
 import importlib
 import pkgutil
+import signal
 import sys
 from typing import Sequence
 
@@ -72,12 +74,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     atexit.register(gc.freeze)
     if argv is None:
         argv = sys.argv[1:]
-    parser = build_parser(_command_module(argv))
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
-    from threadpoolctl import threadpool_limits
+    try:  # building the parsers imports the command's module: a Ctrl-C then is an interrupt like any other
+        parser = build_parser(_command_module(argv))
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        from threadpoolctl import threadpool_limits
+    except KeyboardInterrupt:
+        return _interrupted()
 
     # A single-scan `recognize` spends its start importing numba and scipy and loading kernels: ~10^5 long-lived
     # objects that the cyclic collector traverses again and again and never frees (~0.1 s of ~1.1 s, measured
@@ -100,12 +105,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 1
     except KeyboardInterrupt:
-        print("semslam: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
     finally:
         if pause_gc:
             gc.enable()
 
 
+def _interrupted() -> int:
+    """A Ctrl-C: one line, exit status 130 (128 + SIGINT). A second Ctrl-C while semslam cleans up (staging
+    folders are removed by the code the interrupt unwound) is one line too."""
+    print("semslam: interrupted", file=sys.stderr)
+    return 130
+
+
+def console() -> None:
+    """The ``semslam`` command (``[project.scripts]``): :func:`main`, whose interrupts at any moment — start-up
+    included — end with one line and status 130, never a traceback. Once main returns, further Ctrl-Cs are
+    ignored: the interpreter's exit (atexit handlers of numba, Dask, logging) is not interrupted half-way."""
+    try:
+        code = main()
+    except KeyboardInterrupt:  # between main's own handlers (e.g. in its finally clause)
+        code = _interrupted()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    console()

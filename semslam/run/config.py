@@ -46,11 +46,11 @@ from ..errors import ConfigError, SemslamError
 from ..pipeline.config import PipelineConfig
 from ..slam.config import MODES, SlamConfig
 
+from ..modes import BACKENDS
+
 __all__ = ["BACKENDS", "CONFIG_FILE", "PRESETS", "RunConfig", "RunSection", "load_run_config",
            "write_resolved_config"]
 
-#: SLAM estimators (``semslam run --backend``)
-BACKENDS = ("ekf", "isam2", "batch")
 #: the resolved configuration a run writes into its output directory
 CONFIG_FILE = "config.toml"
 

@@ -17,13 +17,12 @@ from ..errors import SlamError
 from ..symmetry import Symmetry
 from ..slam.config import MODES, SlamConfig
 from ..evaluation.slam_run import evaluate_run
+from ..modes import BACKENDS
 from ..slam.initial import InitialState, initial_state_of
 from ..slam.results import SlamResult
 from ..slam.session import SlamSession
 from ..slam.survey import Survey
 
-#: the estimators behind a run (see :func:`run_slam`)
-BACKENDS = ("ekf", "isam2", "batch")
 
 
 def feed_message(session: Any, stamp_s: float, kind: str, payload: tuple) -> None:

@@ -56,6 +56,47 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
     return write_outcome(outcome, out, dive=dive, pipeline_config=recognizer.config, seed=seed, export=export)
 
 
+def detect_dive(source: Any, *, db, topics=None, vehicle=None, msg_dirs=(), pipeline_config=None, seed: int = 0,
+                up_from_attitude: bool = False, keep_unreliable: bool = False, progress: Any = False) -> RunOutcome:
+    """Recognise every scan of the dive ``source`` (bag, mission directory, Dataset) with the view database ``db``:
+    the detections :func:`run_dive` would keep for SLAM, through the same runner (only dead reckoning rides along,
+    for the scans' timing), nothing written. ``semslam detect`` is this call and a file.
+
+    Raises :class:`~semslam.errors.InputError` when the dive has no scan."""
+    from .._progress import progress_steps
+    from ..errors import InputError
+    from ..pipeline import ScanRecognizer
+
+    dive = open_dive(source, topics=topics, vehicle=vehicle, msg_dirs=msg_dirs)
+    recognizer = ScanRecognizer(db, pipeline_config, seed=seed)
+    recognizer.warm_up()
+    n_scans = len(source.scans) if hasattr(source, "scans") else dive.metadata.get("n_scans")
+    with progress_steps(progress, n_scans, "recognise", "scan") as step:
+        outcome = run_stream(dive, modes=("dr",), recognizer=recognizer, symmetries=db.symmetries(), seed=seed,
+                             keep_unreliable=keep_unreliable, up_from_attitude=up_from_attitude,
+                             on_scan=lambda *_: step())
+    if not outcome.scans:
+        raise InputError(f"The dive {dive.name!r} has no scans to recognise objects in.")
+    return outcome
+
+
+def slam_dive(source: Any, detections_by_scan: dict, *, modes=MODES, topics=None, vehicle=None, msg_dirs=(),
+              config: SlamConfig | None = None, symmetries=None, backend: str = "ekf", survey=None) -> dict:
+    """SLAM in every mode of ``modes`` (one pass of the runner) on the dive ``source`` with detections known in
+    advance (``{scan_id: [Detection]}``, e.g. read from ``semslam detect``'s file), then evaluated against the
+    source's ground truth when it has one: ``{mode: SlamResult}``. ``semslam slam`` is this call and a run
+    directory."""
+    dive = open_dive(source, topics=topics, vehicle=vehicle, msg_dirs=msg_dirs, scans=False)
+    if survey is not None:
+        adopt_survey_frame(dive, survey)
+    outcome = run_stream(dive, modes=tuple(modes), detections_by_scan=detections_by_scan,
+                         config=SlamConfig() if config is None else config, symmetries=symmetries, backend=backend,
+                         survey=survey)
+    from ..evaluation.slam_run import evaluate_results, load_reference
+
+    return evaluate_results(outcome.results, load_reference(source), symmetries)
+
+
 def adopt_survey_frame(dive, survey) -> None:
     """A prior map placed about a geodetic origin defines the world frame: a bag dive without an origin of its own
     takes the map's (its fixes are then converted about it); one with another origin is refused."""

@@ -61,7 +61,7 @@ from ..symmetry import Symmetry
 from .config import KinectConfig
 from .mesh_files import MESH_FORMATS, MESH_SUFFIXES, UNITS_M, ModelUnitWarning, MultiMeshSceneWarning, load_mesh
 from .mesh_files import step_length_unit_m as step_length_unit_m  # re-exported: users and tests import it from here
-from .model_views import _tied_rests as _tied_rests  # re-exported for tests/test_up_from_attitude.py
+from .model_views import _tied_rests as _tied_rests  # re-exported for tests/pipeline/test_up_from_attitude.py
 from .model_views import models_view_clouds
 from .model_views import resting_up_objects as resting_up_objects  # re-exported: tests import it from here
 from .model_views import with_resting_up
