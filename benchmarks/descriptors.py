@@ -124,7 +124,7 @@ def describe_ab(reps: int) -> None:
     step = max(1, len(mission.scans) // 20)
     clusters = [c for r in mission.scans[::step][:20]
                 for c in segment_scene(mission.load_scan(r.scan_id), rec.config.segmentation, seed=0).clusters]
-    limit = rec._max_plausible_extent_m()
+    limit = rec.max_plausible_extent_m()
     clusters = [c for c in clusters if cluster_extent_m(c.points_xyz_m)[0] <= limit]
     times: dict[bool, list[float]] = {False: [], True: []}
     for flag in (False, True):  # warm both paths

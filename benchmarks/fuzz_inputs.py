@@ -15,7 +15,7 @@ model folder through its library reader (``read_topic_map``, ``read_vehicle_toml
 
     python benchmarks/fuzz_inputs.py --seed 0 --cases 12        # cases per family (bags: per mutation kind)
 
-Prints a table of counts per family and class, and the tracebacks found. ``tests/test_fuzz_bags.py`` runs a fixed
+Prints a table of counts per family and class, and the tracebacks found. ``tests/project/test_fuzz_bags.py`` runs a fixed
 in-process subset (:func:`make_bag_cases`, :func:`run_in_process`).
 """
 

@@ -1,19 +1,26 @@
 """Mutation score of the SLAM core (``semslam/slam/``, ``slam/graph/``) and of the numba descriptor kernels.
 
+The SLAM part also covers the modules that moved out of ``slam/`` in issue 30 (run directory and exports to
+``run/``, detections to ``io/``, evaluation against truth to ``evaluation/``): the same set of code as before.
+
 Not run in CI: a benchmark (issue 20, item 2). The tool is **cosmic-ray** (``pip install -e .[mutation]``):
 it rewrites one module on disk per mutant and runs a test command, so it mutates numba ``@njit`` kernels like any
 other code (mutmut 3 skips every decorated function, i.e. every kernel, and its trampolines cannot run inside
 nopython code). Everything happens on a snapshot of the work tree (``--workdir``, default
 ``/tmp/semslam-mutation``): the repository itself is never rewritten.
 
-For each module, the test command runs only a targeted subset of tests (any ``tests/test_mutants_<module>*.py``,
-and ``tests/test_mutants_graph*.py`` for ``slam/graph/``, first, then ``MODULE_TESTS`` below), with
-``pytest -x``, under a per-mutant timeout of ``max(20 s, 3 x baseline + 10 s)`` where the baseline is the same
-command on the unmutated snapshot (which must pass, or the module is refused). Numba: every test process gets ``NUMBA_CACHE_DIR`` = a cache warmed on the unmutated snapshot; when
-the mutated module is a kernel module (it contains ``@njit``), the test process gets a private copy of that cache
-with the mutated module's entries deleted, so the mutant is really compiled by numba (the JIT is kept: the
-kernels' tests are 10-100x too slow under ``NUMBA_DISABLE_JIT=1``, and pure Python is not the code that ships:
-integer wrap-around, typing and bounds differ).
+For each module, the test command runs only a targeted subset of tests, with ``pytest -x``: first the tests
+laid out beside the module (for ``semslam/P/M.py``: ``tests/P/test_M*.py``, with ``M`` without its leading
+underscore; a kernel module ``_X_kernels.py`` also ``tests/P/test_X*.py``; the graph subpackage's are under
+``tests/slam/``, with ``tests/slam/test_graph*.py`` for every module of it; a module at the package root:
+``tests/core/``), then, for a module split out of another (``SPLIT_FROM``), that module's tests, then
+``MODULE_TESTS`` below (file names, found anywhere under ``tests/``), under a per-mutant timeout of
+``max(20 s, 3 x baseline + 10 s)`` where the baseline is the same command on the unmutated snapshot (which must
+pass, or the module is refused). Numba: every test process gets ``NUMBA_CACHE_DIR`` = a cache warmed on the
+unmutated snapshot; when the mutated module is a kernel module (it contains ``@njit``), the test process gets a
+private copy of that cache with the mutated module's entries deleted, so the mutant is really compiled by numba
+(the JIT is kept: the kernels' tests are 10-100x too slow under ``NUMBA_DISABLE_JIT=1``, and pure Python is not
+the code that ships: integer wrap-around, typing and bounds differ).
 
 Operators (one replacement per site, as mutmut does, to keep the count tractable): ``+ -> -``, ``- -> +``,
 ``* -> /``, ``/ -> *``, ``// -> /``, ``% -> /``, ``** -> *``, ``<< -> >>``, ``>> -> <<``, ``& -> |``, ``| -> &``,
@@ -79,35 +86,42 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 EQUIVALENTS = ROOT / "benchmarks" / "mutation_equivalents.toml"
 
-SLAM_MODULES = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "semslam" / "slam").rglob("*.py")
-                      if p.name != "__init__.py")
+# moved out of semslam/slam/ (issue 30): still part of the SLAM score
+MOVED_FROM_SLAM = ["semslam/evaluation/metrics.py", "semslam/evaluation/motion_noise.py",
+                   "semslam/evaluation/slam_run.py", "semslam/io/detections.py", "semslam/run/dataset_loop.py",
+                   "semslam/run/export.py", "semslam/run/export_mcap.py", "semslam/run/rundir.py"]
+SLAM_MODULES = sorted([str(p.relative_to(ROOT)) for p in (ROOT / "semslam" / "slam").rglob("*.py")
+                       if p.name != "__init__.py"] + [m for m in MOVED_FROM_SLAM if (ROOT / m).exists()])
 KERNEL_MODULES = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "semslam" / "descriptors").glob("_*.py")
                         if p.name != "__init__.py")
 
-_EKF = ["test_oracle_ekf.py", "test_slam_ekf.py", "test_oracle_smoother.py", "test_oracle_association.py",
+_EKF = ["test_oracle_ekf.py", "test_ekf.py", "test_oracle_smoother.py", "test_oracle_association.py",
         "test_oracle_symmetry.py", "test_oracle_metrics.py"]
-# module -> the tests that exercise it directly (fast: seconds, not the whole suite)
+# module -> the tests that exercise it directly (fast: seconds, not the whole suite), by file name: each is found
+# wherever it is under tests/ (a name found twice must be given with its folder, e.g. "slam/test_config.py")
 MODULE_TESTS: dict[str, list[str]] = {
     "semslam/slam/_ekf_kernels.py": _EKF,
     "semslam/slam/ekf.py": _EKF + ["test_bad_inputs_slam.py"],
-    "semslam/slam/compressed.py": ["test_oracle_ekf.py", "test_slam_ekf.py", "test_oracle_smoother.py"],
+    "semslam/slam/compressed.py": ["test_oracle_ekf.py", "test_ekf.py", "test_oracle_smoother.py"],
     "semslam/slam/association.py": ["test_oracle_association.py", "test_oracle_symmetry.py",
-                                    "test_oracle_metrics.py", "test_slam_ekf.py", "test_bad_inputs_slam.py"],
+                                    "test_oracle_metrics.py", "test_ekf.py", "test_bad_inputs_slam.py"],
     "semslam/slam/consensus.py": ["test_oracle_symmetry.py", "test_bad_inputs_slam.py"],
-    "semslam/slam/metrics.py": ["test_oracle_metrics.py", "test_bad_inputs_slam.py"],
-    "semslam/slam/smoother.py": ["test_oracle_smoother.py", "test_slam_smoother.py"],
-    "semslam/slam/evaluation.py": ["test_evaluation.py", "test_bad_inputs_slam.py"],
+    "semslam/evaluation/metrics.py": ["test_oracle_metrics.py", "test_bad_inputs_slam.py"],
+    "semslam/slam/smoother.py": ["test_oracle_smoother.py", "test_smoother.py"],
+    "semslam/evaluation/slam_run.py": ["test_evaluation.py", "test_bad_inputs_slam.py"],
     "semslam/slam/config.py": ["test_bad_inputs_slam.py", "test_slam_runner.py"],
-    "semslam/slam/detections.py": ["test_bad_inputs_slam.py", "test_slam_runner.py"],
-    "semslam/slam/motion_noise.py": ["test_dvl_outage.py", "test_slam_realism.py"],
+    "semslam/io/detections.py": ["test_bad_inputs_slam.py", "test_slam_runner.py"],
+    "semslam/evaluation/motion_noise.py": ["test_dvl_outage.py", "test_slam_realism.py"],
     "semslam/slam/sensors.py": ["test_slam_realism.py", "test_dvl_outage.py", "test_slam_runner.py"],
     "semslam/slam/session.py": ["test_slam_runner.py", "test_bad_inputs_slam.py", "test_dvl_outage.py"],
-    "semslam/slam/runner.py": ["test_slam_runner.py", "test_bad_inputs_slam.py"],
+    "semslam/run/dataset_loop.py": ["test_slam_runner.py", "test_bad_inputs_slam.py"],   # was slam/runner.py
+    "semslam/slam/initial.py": ["test_slam_start.py", "test_dataset.py"],
+    "semslam/slam/survey.py": ["test_bad_inputs_slam.py"],
     "semslam/slam/mapping.py": ["test_slam_runner.py", "test_export.py"],
     "semslam/slam/results.py": ["test_slam_runner.py", "test_export.py"],
-    "semslam/slam/rundir.py": ["test_slam_runner.py", "test_export.py", "test_bag_dataset.py"],
-    "semslam/slam/export.py": ["test_export.py"],
-    "semslam/slam/export_mcap.py": ["test_export.py"],
+    "semslam/run/rundir.py": ["test_slam_runner.py", "test_export.py", "test_bag_dataset.py"],
+    "semslam/run/export.py": ["test_export.py"],
+    "semslam/run/export_mcap.py": ["test_export.py"],
     "semslam/slam/graph/backend.py": ["test_graph_backend.py", "test_graph_factors.py", "test_graph_robust.py"],
     "semslam/slam/graph/factors.py": ["test_graph_factors.py", "test_graph_robust.py"],
     "semslam/slam/graph/frontend.py": ["test_graph_backend.py", "test_graph_robust.py"],
@@ -118,6 +132,16 @@ MODULE_TESTS: dict[str, list[str]] = {
     "semslam/descriptors/_neighbors_kernels.py": ["test_neighbors.py", "test_fpfh_bounded.py"],
     "semslam/descriptors/_normals_kernels.py": ["test_normals.py"],
     "semslam/descriptors/_pair_kernels.py": ["test_fpfh.py", "test_vfh.py"],
+}
+
+# a module split out of another (issue 30) also runs the tests of the module it came from
+SPLIT_FROM: dict[str, str] = {
+    "semslam/descriptors/_glibc_rand_kernels.py": "semslam/descriptors/_esf_kernels.py",
+    "semslam/descriptors/_vfh_kernels.py": "semslam/descriptors/_pair_kernels.py",
+    "semslam/slam/association_search.py": "semslam/slam/association.py",
+    "semslam/slam/consistency.py": "semslam/evaluation/metrics.py",
+    "semslam/slam/session_inputs.py": "semslam/slam/session.py",
+    "semslam/slam/session_result.py": "semslam/slam/session.py",
 }
 
 OPERATORS = {
@@ -151,16 +175,49 @@ def _stem(module: str) -> str:
     return Path(module).stem.lstrip("_")
 
 
+def _tests_dir(module: str) -> str:
+    """The tests folder of a module, laid out like the code: ``semslam/P/M.py`` -> ``P``, ``semslam/M.py`` ->
+    ``core``; a subpackage's tests are with its package's (``semslam/slam/graph/M.py`` -> ``slam``)."""
+    parts = Path(module).parts[1:-1]
+    return parts[0] if parts else "core"
+
+
+def _beside(module: str, tree: Path) -> list[str]:
+    """The tests laid out beside ``module`` (see the module docstring), as paths relative to ``tree``."""
+    folder = tree / "tests" / _tests_dir(module)
+    stem = _stem(module)
+    patterns = [f"test_{stem}*.py"]
+    if stem.endswith("_kernels"):   # _esf_kernels.py: its tests are those of the module it serves, test_esf*.py
+        patterns.append(f"test_{stem.removesuffix('_kernels')}*.py")
+    if Path(module).parent.name == "graph":   # tests/slam/test_graph*.py: the graph subpackage's
+        patterns.append("test_graph*.py")
+    found = [p for pat in patterns for p in sorted(folder.glob(pat))]
+    return [str(p.relative_to(tree)) for p in found]
+
+
+def _find_test(name: str, tree: Path) -> str:
+    """A ``MODULE_TESTS`` entry (a file name, or a path under ``tests/``) as a path relative to ``tree``."""
+    tests = tree / "tests"
+    hits = [tests / name] if "/" in name else sorted(tests.rglob(name))
+    hits = [p for p in hits if p.is_file() and "data" not in p.relative_to(tests).parts[:-1]]
+    if len(hits) != 1:
+        what = "not found" if not hits else f"found {len(hits)} times ({', '.join(str(p) for p in hits)})"
+        raise SystemExit(f"mutation: MODULE_TESTS: tests/**/{name} {what} (give its folder, e.g. slam/{name})")
+    return str(hits[0].relative_to(tree))
+
+
 def _tests_for(module: str, tree: Path) -> list[str]:
     # the targeted tests first: a mutant that survived the module's other tests before they were written is then
     # killed in seconds (``pytest -x``); the set of tests, hence killed or not, does not depend on the order
-    files = sorted(p.name for p in (tree / "tests").glob(f"test_mutants_{_stem(module)}*.py"))
-    if Path(module).parent.name == "graph":   # tests/test_mutants_graph*.py: the graph subpackage's
-        files += sorted(p.name for p in (tree / "tests").glob("test_mutants_graph*.py"))
-    files += list(MODULE_TESTS.get(module, []))
+    files = _beside(module, tree)
+    parent = SPLIT_FROM.get(module)
+    if parent is not None:
+        files += _beside(parent, tree) + [_find_test(f, tree) for f in MODULE_TESTS.get(parent, [])]
+    files += [_find_test(f, tree) for f in MODULE_TESTS.get(module, [])]
     if not files:
-        raise SystemExit(f"mutation: no tests mapped for {module} (add it to MODULE_TESTS)")
-    return [f"tests/{f}" for f in dict.fromkeys(files)]
+        raise SystemExit(f"mutation: no tests for {module} (none in tests/{_tests_dir(module)}/test_"
+                         f"{_stem(module)}*.py; add it to MODULE_TESTS)")
+    return list(dict.fromkeys(files))
 
 
 def _is_kernel(path: Path) -> bool:
@@ -198,10 +255,17 @@ def snapshot(workdir: Path, fresh: bool, refresh: bool = False) -> Path:
         shutil.copytree(ROOT / "semslam", tree / "semslam", ignore=ignore)
         shutil.copytree(ROOT / "tests", tree / "tests", ignore=ignore, dirs_exist_ok=True)
         shutil.copy2(ROOT / "pyproject.toml", tree / "pyproject.toml")
-    else:  # new or strengthened tests are picked up; the code under test stays the snapshot
-        for p in (ROOT / "tests").glob("test_*.py"):
-            if not (tree / "tests" / p.name).exists() or p.read_bytes() != (tree / "tests" / p.name).read_bytes():
-                shutil.copy2(p, tree / "tests" / p.name)
+    else:  # new, moved or strengthened tests (and helpers) are picked up; the code under test stays the snapshot
+        for p in (ROOT / "tests").rglob("*.py"):
+            rel = p.relative_to(ROOT)
+            if "__pycache__" in rel.parts or "data" in rel.parts:
+                continue
+            dst = tree / rel
+            if not dst.exists() or p.read_bytes() != dst.read_bytes():
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(p, dst)
+        if (ROOT / "pyproject.toml").read_bytes() != (tree / "pyproject.toml").read_bytes():   # pytest's options
+            shutil.copy2(ROOT / "pyproject.toml", tree / "pyproject.toml")
     return tree
 
 
@@ -537,6 +601,11 @@ def stratified(strata: list[tuple[int, int, int, int]], z: float = 1.96) -> tupl
     return est, max(0.0, est - math.sqrt(v_lo)), min(1.0, est + math.sqrt(v_hi))
 
 
+def _group(module: str) -> str:
+    """The report's group of a module: the SLAM core (with the modules moved out of ``slam/``) or the kernels."""
+    return "slam/" if module in SLAM_MODULES or module.startswith("semslam/slam/") else "descriptor kernels"
+
+
 def report(modules: list[str], workdir: Path) -> str:
     equivalents = load_equivalents()
     strata: dict[str, list] = {}
@@ -550,7 +619,7 @@ def report(modules: list[str], workdir: Path) -> str:
         if c is None:
             lines.append(f"| {_short(m)} | not run | | | | | | | |")
             continue
-        tot = groups.setdefault("slam/" if m.startswith("semslam/slam/") else "descriptor kernels",
+        tot = groups.setdefault(_group(m),
                                 dict.fromkeys(keys, 0))
         for k in keys:
             tot[k] += c[k]
@@ -562,7 +631,7 @@ def report(modules: list[str], workdir: Path) -> str:
             lo, hi = _wilson(hit, den)
             sample = f"{c['total']}/{c['total'] + c['sampled_out']} ({100 * lo:.0f}-{100 * hi:.0f} %)"
         if c["pending"] == 0:
-            strata.setdefault("slam/" if m.startswith("semslam/slam/") else "descriptor kernels", []).append(
+            strata.setdefault(_group(m), []).append(
                 (c["total"] + c["sampled_out"], c["total"], c["equivalent"], hit))
         cfg = _session_paths(workdir, m)[0]
         sha = _session_sha(cfg)

@@ -58,7 +58,7 @@ def pose_table(n: int, prior: bool) -> None:
     from semslam.simulation import builtin_objects
 
     rng = np.random.default_rng(0)
-    mode = "prior pose (3 mm, 2 deg)" if prior else "full (FPFH + RANSAC + ICP)"
+    mode = "prior pose (3 mm, 2 deg)" if prior else "full (grid search + ICP, the default)"
     print(f"\nPose estimation, {mode}, {n} scans per object, 1-5k points at 0.5-2 m, 1 mm range noise\n")
     print("| object | median rot err deg | median trans err mm | success (<10 deg, <1 cm) | mean NEES | median NEES | median ms |")
     print("|---|---|---|---|---|---|---|")

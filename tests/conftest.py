@@ -13,23 +13,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-TEST_DATA = Path(__file__).resolve().parent / "data"
-SHARED = Path(os.environ.get("SEMSLAM_SHARED", ROOT.parent / "shared"))
-
-
-def _missing(what: str, env: str) -> None:
-    """Skip (with the reason) unless ``env`` says this run must have ``what``: then fail."""
-    if os.environ.get(env, "") not in ("", "0"):
-        pytest.fail(f"{what} (required by {env}=1)")
-    pytest.skip(what)
-
-
-def require_shared(path: Path, what: str) -> Path:
-    """``path`` from ``../shared``, or a skip (a failure under SEMSLAM_REQUIRE_SHARED=1) naming ``what``."""
-    if not path.exists():
-        _missing(f"{what} not found at {path}", "SEMSLAM_REQUIRE_SHARED")
-    return path
+from tests._support.shared import SHARED, TEST_DATA, require_shared
+from tests._support.shared import missing as _missing
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):

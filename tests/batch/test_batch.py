@@ -19,7 +19,7 @@ from semslam._outdir import MARKER, is_owned
 from semslam.cli.cmd_batch import process_dive
 from semslam.batch.dives import INDEX, SUMMARY_CSV, SUMMARY_MD, TIMINGS, run_batch
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 OPTIONS = {"modes": ["dr", "pose"], "seed": 3, "no_report": True}
 
 

@@ -25,7 +25,7 @@ from semslam.errors import InputError
 from semslam.batch import engine as _dask
 from semslam.batch.engine import dask_client, map_tasks, scheduler_security, scheduler_tls
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 DASK = BIN / "dask"
 

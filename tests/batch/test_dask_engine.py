@@ -18,7 +18,7 @@ import pytest
 from semslam.errors import InputError, SlamError
 from semslam.batch.engine import TaskFailed, check_jobs, map_tasks
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 
 
 def test_serial_and_cluster_give_ordered_results(client):

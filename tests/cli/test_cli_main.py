@@ -40,7 +40,7 @@ def test_semslam_error_is_one_line_and_exit_1(tmp_path):
 
 
 def test_the_cli_mode_choices_are_the_filter_modes():
-    """cmd_slam spells the modes out (importing semslam.slam to build the parser cost 0.4 s per command)."""
+    """The CLI offers exactly the filter's modes (both read semslam.modes), plus "all"."""
     from semslam.cli.cmd_slam import MODE_CHOICES
     from semslam.slam import MODES
 

@@ -15,7 +15,7 @@ import pytest
 from semslam._outdir import MARKER, is_owned
 from semslam.cli.main import main
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 
 #: folders semslam did not write: a user's, look-alikes of a run and of a mission, a run marked before ownership ids
 PLANTED = {
@@ -145,7 +145,7 @@ def test_writing_beside_someone_elses_staging_folder_leaves_it_alone(world, caps
         argv = _commands(inp, str(work / n))[cmd]
         assert main(argv + ["--json"]) == 0, cmd
         assert is_owned(work / n), cmd
-        if cmd != "slam":  # (tests/test_outdir.py replaces a slam run)
+        if cmd != "slam":  # (tests/core/test_outdir.py replaces a slam run)
             assert main(argv + ["--json", "--overwrite"]) == 0, cmd  # an output semslam proves it wrote: replaced
     for cmd, n in files.items():
         argv = _file_commands(inp, str(work / n))[cmd]

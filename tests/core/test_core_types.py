@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from semslam import Detection, PointCloud, RigidTransform
+from semslam.cloud import PointCloud
+from semslam.detection import Detection
+from semslam.geometry import RigidTransform
 from semslam.errors import InputError, SemslamError
 from semslam.geometry import (
     quat_wxyz_from_rotation,

@@ -23,7 +23,7 @@ from semslam.slam import SlamConfig
 from semslam.slam.config import _SECTIONS as SLAM_SECTIONS
 from semslam.slam.session import SlamSession
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _one_line(exc: BaseException, *words: str) -> str:

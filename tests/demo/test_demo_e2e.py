@@ -177,7 +177,7 @@ def test_report_checks_pass_in_headless_chromium(quick_run):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if not chromium:
         pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "report_chromium.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "report_chromium.py"
     spec = importlib.util.spec_from_file_location("report_chromium", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -11,7 +11,7 @@ import pytest
 from semslam.cli.main import main
 from semslam.errors import SimulationError
 
-MODELS = Path(__file__).parent / "data" / "models"
+MODELS = Path(__file__).parents[1] / "data" / "models"
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from semslam.errors import PcdError, SemslamError
 from semslam.io.pcd import read_pcd, write_pcd
 
-IO = Path(__file__).resolve().parent / "data" / "io"
+IO = Path(__file__).resolve().parents[1] / "data" / "io"
 N_EXAMPLES = 600
 
 

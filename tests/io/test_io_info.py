@@ -12,7 +12,7 @@ from semslam.cli.main import main
 from semslam.cloud import PointCloud
 from semslam.io import write_point_cloud
 
-IO = Path(__file__).resolve().parent / "data" / "io"
+IO = Path(__file__).resolve().parents[1] / "data" / "io"
 
 
 @pytest.mark.parametrize("where", ["before", "after"])

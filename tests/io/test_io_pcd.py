@@ -17,7 +17,7 @@ from semslam.io import read_point_cloud, write_point_cloud
 from semslam.io.pcd import PcdData, read_pcd, write_pcd
 
 ENCODINGS = ("ascii", "binary", "binary_compressed")
-IO = Path(__file__).resolve().parent / "data" / "io"
+IO = Path(__file__).resolve().parents[1] / "data" / "io"
 
 # (file, width, height, points, NaN points, encoding, fields) as PCL 1.13 reports them (shared README, pcl_ref read)
 REAL = [

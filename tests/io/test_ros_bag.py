@@ -15,10 +15,10 @@ import pytest
 from semslam.errors import BagError
 from semslam.io.ros import TopicRecord, decode_pointcloud2, imu_to_ned_frd, open_bag
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHARED = ROOT.parent / "shared"
 REAL_BAG = SHARED / "data" / "bags" / "pointcloud2_ros1.bag"
-BAGS = Path(__file__).resolve().parent / "data" / "bags"
+BAGS = Path(__file__).resolve().parents[1] / "data" / "bags"
 MSG_DIR = BAGS / "msg"
 
 _spec = importlib.util.spec_from_file_location("make_test_bags", ROOT / "tests" / "data" / "make_test_bags.py")
@@ -51,7 +51,7 @@ def _watchdog():
 
 @pytest.fixture(scope="module")
 def real_bag() -> Path:
-    from conftest import require_shared
+    from tests._support.shared import require_shared
 
     return require_shared(REAL_BAG, "real ROS 1 bag (../shared/data/bags)")
 
@@ -148,7 +148,7 @@ def test_generated_messages_time_ordered_and_decoded(kind: str) -> None:
 @pytest.mark.parametrize("kind", ["sqlite3", "mcap", "bare_mcap", "bare_db3"])
 def test_ros2_semslam_dvl_reads_without_msg_dir(kind: str) -> None:
     """The ROS 2 bags do not embed semslam_msgs/Dvl: its packaged definition reads it (a type nobody defines
-    still needs --msg-dir: tests/test_ros_dvl_messages.py)."""
+    still needs --msg-dir: tests/io/test_ros_dvl_messages.py)."""
     with _opened(kind, with_msg_dir=False) as bag:
         dvl = list(bag.messages(["/dvl/raw"]))
     assert len(dvl) == 5 and dvl[0].msgtype == "semslam_msgs/msg/Dvl"

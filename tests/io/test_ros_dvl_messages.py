@@ -232,5 +232,5 @@ def test_packaged_definitions_cover_every_documented_type_and_match_the_writer()
     files = sorted(p.relative_to(PACKAGED_MSG_DIR) for p in PACKAGED_MSG_DIR.rglob("*") if p.is_file())
     assert all(len(f.parts) == 3 and f.parts[1] == "msg" and f.suffix == ".msg" or f == Path("SOURCES.md")
                for f in files), files
-    pyproject = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
+    pyproject = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
     assert '"io/ros/msg/*/msg/*.msg"' in pyproject and '"io/ros/msg/*.md"' in pyproject

@@ -195,8 +195,8 @@ def test_bad_settings_name_the_argument():
     assert PipelineConfig().to_dict()["attached"] is None
 
 
-REAL = Path(__file__).parent / "data" / "real_valves"
-FRAME = Path(__file__).parent / "data" / "real_frames" / "ball_valve_yaw000_1_crop.pcd"
+REAL = Path(__file__).parents[1] / "data" / "real_valves"
+FRAME = Path(__file__).parents[1] / "data" / "real_frames" / "ball_valve_yaw000_1_crop.pcd"
 FRAME_SEG = {"drop_origin": True, "max_range_m": 0.5, "voxel_leaf_m": "auto", "cluster_tolerance_m": "auto",
              "max_planes": 0}
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-import semslam.pipeline._scan_helpers as helpers
+import semslam.pipeline.hypothesis as helpers
 from semslam.cli.main import main
 from semslam.dataset import AttitudeLog, Dataset, DepthLog, DvlLog, ScanRecord, VehicleDescription
 from semslam.errors import InputError
@@ -23,7 +23,7 @@ from semslam.pipeline.mission import detect_mission
 from semslam.pipeline.mission import MAX_ATTITUDE_GAP_S, up_in_scanner
 from semslam.recognition import load_database
 
-SUBSET = Path(__file__).parent / "data" / "real_valves"
+SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
 
 
 def _dataset(rpy_rad: np.ndarray, stamps: np.ndarray, R_vehicle_scanner: np.ndarray, scans=(), clouds=None) -> Dataset:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import fuzz_inputs as fz  # noqa: E402
 
 from semslam.errors import BagError  # noqa: E402
@@ -182,7 +182,7 @@ def fuzz_cases(base):
     work = root / "cases"
     cases = fz.make_bag_cases(ds, bags, work, seed=31, per_kind=2)
     cases += fz.make_toml_cases(fz.base_toml_files(ds, root / "toml"), work, seed=31, per_kind=2)
-    cases += fz.make_model_cases(Path(__file__).parent / "data" / "models", work, seed=31, per_kind=6)
+    cases += fz.make_model_cases(Path(__file__).parents[1] / "data" / "models", work, seed=31, per_kind=6)
     return cases
 
 

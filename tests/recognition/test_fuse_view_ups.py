@@ -18,7 +18,7 @@ from semslam.io import read_point_cloud, write_point_cloud
 from semslam.recognition.fuse import fuse_class_views, read_up_csv
 from semslam.recognition.storage import load_database
 
-SUBSET = Path(__file__).parent / "data" / "real_valves"
+SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
 LEVEL_UP = np.array([0.0, -1.0, 0.0])
 PITCH_DEG = {"pitch000_yaw000_30cm_1": 0.0, "pitch000_yaw000_30cm_2": 25.0, "pitch000_yaw030_30cm_1": -15.0,
              "pitch000_yaw030_30cm_2": 10.0}

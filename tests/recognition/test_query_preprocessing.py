@@ -151,7 +151,7 @@ def _spacing(cloud):
 def test_folder_database_of_real_views_cleans_raw_queries(shared_dir, tmp_path):
     """Real RealSense views (../shared; each file ends with 405 drawn points): a database built from the folder
     records its cleaning, and a held-out raw view is described exactly as when cleaned by hand."""
-    from conftest import require_shared
+    from tests._support.shared import require_shared
     from semslam.io import read_point_cloud
     from semslam.segmentation.clean import clean_view
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from semslam.cli.main import main
-from tests.conftest import require_shared
+from tests._support.shared import require_shared
 
 DRAWN_TAIL = 405
 CLASSES = ("ball_valve", "globe_valve")

@@ -25,8 +25,8 @@ from semslam.recognition.rejection import calibrate_rejection, loo_same_class_di
 from semslam.registration import align_upright
 from semslam.segmentation.clean import clean_view, drawn_line_mask
 
-SUBSET = Path(__file__).parent / "data" / "real_valves"
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 UP = np.array([0.0, -1.0, 0.0])  # level camera, y down
 
 
@@ -87,7 +87,7 @@ def test_clean_view_drops_origin_points_and_a_drawn_line_but_no_real_point():
 
 def test_drawn_line_mask_finds_the_shared_views_overlays():
     """The shared RANSAC.pcd views end with 405 drawn points (3 axes and a normal); most must go."""
-    shared = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "valves"
+    shared = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "valves"
     f = shared / "globe_valve" / "pitch000_yaw000_30cm" / "1" / "RANSAC.pcd"
     if not f.exists():
         pytest.skip(f"needs the shared real valve scans ({f})")
@@ -381,7 +381,7 @@ def test_recognize_up_gives_consistent_poses_on_real_frames(tmp_path):
     import json
     import shutil
 
-    shared = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "valves" / "globe_valve"
+    shared = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "valves" / "globe_valve"
     frames = [shared / "pitch000_yaw030_30cm" / n / "Captured_Frame.pcd" for n in ("1", "2")]
     if not all(f.exists() for f in frames):
         pytest.skip(f"needs the shared real valve frames ({frames[0]})")

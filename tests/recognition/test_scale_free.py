@@ -212,7 +212,7 @@ def test_fixed_metre_lengths_fail_off_scale_with_a_clear_error(kinect_views):
 
 def test_fixed_lengths_keep_the_old_descriptors_and_params(kinect_views):
     """The default (fixed) path: no measured spacing, the old params keys, VFH exactly as the plain composition
-    of voxel grid, normals and compute_vfh (the goldens of tests/test_database.py cover the rest)."""
+    of voxel grid, normals and compute_vfh (the goldens of tests/recognition/test_database.py cover the rest)."""
     from semslam.segmentation.voxel import voxel_downsample
 
     views, classes = kinect_views

@@ -18,8 +18,8 @@ from semslam.cloud import PointCloud
 from semslam.io import write_point_cloud
 from semslam.registration import align_upright
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
-SUBSET = Path(__file__).parent / "data" / "real_valves"
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from ros1_helpers import require_ros
+from tests._support.ros1 import require_ros
 
 
 def test_the_bridge_links_ros_modules_but_never_the_venvs_own(tmp_path):

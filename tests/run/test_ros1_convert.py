@@ -136,7 +136,7 @@ def test_the_bag_readers_decoding_on_raw_bytes(ros1_bag):
     from semslam.dataset.rosbag import stream_bag
     from semslam.io.ros import open_bag
     from semslam.run.ros1.decode import LiveDecoder
-    from ros1_helpers import raw_bag_messages
+    from tests._support.ros1 import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
     topics = [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans]
@@ -210,7 +210,7 @@ def test_live_wiring_shuffled_within_the_window_gives_the_offline_trajectory(ros
     from semslam.run import open_dive, run_stream
     from semslam.run.ros1.decode import LiveDecoder
     from semslam.run.ros1.live import LiveSlam
-    from ros1_helpers import raw_bag_messages
+    from tests._support.ros1 import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
     ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle, scans=False), modes=("dr",)).results["dr"]
@@ -253,7 +253,7 @@ def test_a_late_message_is_counted_by_the_runner_never_applied(ros1_bag):
     """A navigation message older than what the runner already processed is dropped and counted per kind."""
     from semslam.run.ros1.decode import LiveDecoder
     from semslam.run.ros1.live import LiveSlam
-    from ros1_helpers import raw_bag_messages
+    from tests._support.ros1 import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
     dec = LiveDecoder(tmap, vehicle)
@@ -319,7 +319,7 @@ def test_live_fixes_and_a_prior_map_give_semslam_runs_result(tmp_path):
     from semslam.run.ros1.decode import LiveDecoder
     from semslam.run.ros1.live import LiveSlam
     from semslam.run.ros1.node import _prior_map
-    from ros1_helpers import raw_bag_messages
+    from tests._support.ros1 import raw_bag_messages
 
     bag = tmp_path / "fixes.bag"
     assert main(["--json", "simulate", "--out", str(bag), "--format", "ros1", "--quick", "--seed", "5", "--gps", "5",
@@ -396,7 +396,7 @@ def test_scans_slower_than_the_messages_still_give_semslam_runs_result(ros1_bag)
     from semslam.run import open_dive, run_stream
     from semslam.run.ros1.decode import LiveDecoder
     from semslam.run.ros1.live import LiveSlam
-    from ros1_helpers import raw_bag_messages
+    from tests._support.ros1 import raw_bag_messages
 
     bag, tmap, vehicle = ros1_bag
     ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("pose",), recognizer=_SlowRecognizer())

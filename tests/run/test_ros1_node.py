@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from ros1_helpers import free_port, require_ros, ros_env, roscore, started, stop
+from tests._support.ros1 import free_port, require_ros, ros_env, roscore, started, stop
 
 pytestmark = pytest.mark.slow
 

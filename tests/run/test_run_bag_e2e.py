@@ -62,6 +62,23 @@ def test_bag_and_mission_directory_give_the_same_run(dive, tmp_path, capsys):
     np.testing.assert_allclose(a[-1, 1:4], b[-1, 1:4], atol=0.01)
 
 
+def test_detect_on_a_bag_gives_the_detections_run_keeps(dive, tmp_path, capsys):
+    """`semslam detect BAG` streams the bag through the runner of `semslam run`: the same scans and detections, byte
+    for byte, as the run directory's detections.jsonl, nothing converted on disk (this short dive's scans hold no
+    detection; the demo's mission, with detections, is checked the same way in test_demo_e2e)."""
+    code, _ = _run(capsys, str(dive / "dive.bag"), "--db", "builtin", "--out", str(tmp_path / "r"), "--mode", "pose")
+    assert code == 0
+    dets = tmp_path / "dets.jsonl"
+    assert main(["detect", str(dive / "dive.bag"), "--db", "builtin", "--out", str(dets), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)["summary"]
+    run = json.loads((tmp_path / "r" / "run.json").read_text())
+    assert summary["n_scans"] == run["detection"]["n_scans"] > 0
+    assert summary["n_clusters"] == run["detection"]["n_clusters"] > 0
+    assert summary["n_kept"] == len(dets.read_text().splitlines())
+    assert dets.read_text() == (tmp_path / "r" / "detections.jsonl").read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dets.jsonl", "dets.jsonl.config.json", "r"]
+
+
 def test_same_dive_with_and_without_ground_truth_gives_byte_identical_trajectories_and_maps(dive, tmp_path, capsys):
     blind = tmp_path / "blind"
     shutil.copytree(dive / "mission", blind)

@@ -18,7 +18,7 @@ from semslam.run.config import CONFIG_FILE, PRESETS, RunConfig, load_run_config,
 from semslam.segmentation import SegmentationConfig
 from semslam.slam import MODES, SlamConfig
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _catalogue_configs() -> dict:

@@ -7,7 +7,7 @@ import pytest
 
 from semslam.cloud import PointCloud
 from semslam.segmentation import segment_scene
-from tests.test_segment_cli import tank_scene
+from tests._support.scenes import tank_scene
 
 
 @pytest.mark.parametrize("outlier", [[1e9, 1e9, 1e9], [-1e9, 0.0, 0.0], [1e12, 3.0, -1e12]])

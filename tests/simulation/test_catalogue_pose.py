@@ -72,7 +72,6 @@ def test_size_limit_admits_the_whole_l_shaped_part(butterfly):
     admits it; box-like classes keep their limit; the default (``"box"``) is the old rule."""
     from semslam.errors import InputError
     from semslam.pipeline import PipelineConfig, ScanRecognizer
-    from semslam.pipeline._scan_helpers import _class_size_limit_m
     from semslam.recognition import build_database
 
     parts = catalogue_objects()
@@ -85,11 +84,11 @@ def test_size_limit_admits_the_whole_l_shaped_part(butterfly):
     whole = principal_extent(np.ascontiguousarray(trimesh.sample.sample_surface(mesh, 20000, seed=0)[0]))[0]
     box_limit = 1.15 * float(np.max(parts["butterfly_valve"].size_xyz_m)) + 0.01
     assert whole > box_limit
-    assert _class_size_limit_m(rec, "butterfly_valve") >= whole
-    assert _class_size_limit_m(rec, "flange") == pytest.approx(1.15 * 0.2 + 0.01, abs=0.004)
-    assert rec._max_plausible_extent_m() == max(_class_size_limit_m(rec, c) for c in rec.db.classes)
+    assert rec.class_size_limit_m("butterfly_valve") >= whole
+    assert rec.class_size_limit_m("flange") == pytest.approx(1.15 * 0.2 + 0.01, abs=0.004)
+    assert rec.max_plausible_extent_m() == max(rec.class_size_limit_m(c) for c in rec.db.classes)
     box = ScanRecognizer(db)  # the default: the bounding box's longest side
-    assert _class_size_limit_m(box, "butterfly_valve") == pytest.approx(box_limit)
+    assert box.class_size_limit_m("butterfly_valve") == pytest.approx(box_limit)
     with pytest.raises(InputError, match="size_reference"):
         PipelineConfig(size_reference="diagonal")
     assert PipelineConfig.from_dict(PipelineConfig(size_reference="principal").to_dict()).size_reference == "principal"

@@ -11,7 +11,7 @@ from semslam.detection import Detection
 from semslam.errors import ConfigError, InputError, SemslamError
 from semslam.geometry import RigidTransform
 from semslam.pipeline import PipelineConfig, ScanRecognizer
-from semslam.pipeline._scan_helpers import _verification_failure
+from semslam.pipeline.hypothesis import verification_failure as _verification_failure
 from semslam.simulation.occlusion import occlude_objects
 
 

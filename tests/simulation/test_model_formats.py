@@ -19,7 +19,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from tests.conftest import require_shared
+from tests._support.shared import require_shared
 from semslam.cli.main import main
 from semslam.errors import DatabaseError
 from semslam.simulation.cad_models import (

@@ -98,7 +98,7 @@ def test_sensor_rates_and_truth(long_nav):
 def test_no_scans_gives_the_same_navigation(tiny_mission):
     nav = simulate_mission(_tiny(), seed=7, with_scans=False)
     assert nav.scans == [] and nav.scan_clouds is None
-    for a, b in [(nav.dvl.velocity_body_mps, tiny_mission.dvl.velocity_body_mps), (nav.ahrs.rpy_rad, tiny_mission.ahrs.rpy_rad),
+    for a, b in [(nav.dvl.velocity_body_mps, tiny_mission.dvl.velocity_body_mps), (nav.attitude.rpy_rad, tiny_mission.attitude.rpy_rad),
                  (nav.depth.depth_m, tiny_mission.depth.depth_m), (nav.truth.position_ned_m, tiny_mission.truth.position_ned_m)]:
         np.testing.assert_array_equal(a, b)
 

@@ -1,9 +1,9 @@
 """Regenerate segment_scene_golden.json: bit-level fingerprints of segment_scene and voxel_grid on
-the tank_scene of tests/test_segment_cli.py.
+the tank_scene of tests/_support/scenes.py.
 
 The committed file was written by the implementation before the latency pass (commit c184769:
 sort-based voxel grid, NumPy cluster glue); the current implementation reproduces it byte for
-byte (tests/test_segment_cli.py::test_matches_golden_of_previous_implementation).
+byte (tests/cli/test_segment_cli.py::test_matches_golden_of_previous_implementation).
 
     .venv/bin/python tests/data/segmentation/make_scene_golden.py
 """
@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parents[2]), str(HERE.parents[1])]
+sys.path[:0] = [str(HERE.parents[2])]
 
-from test_segment_cli import tank_scene
+from tests._support.scenes import tank_scene
 
 from semslam import segmentation as seg
 
