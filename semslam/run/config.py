@@ -150,7 +150,7 @@ PRESETS: dict[str, dict] = {
     # verified against the scene, sizes along principal axes, part-based unions
     "cluttered": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                "size_reference": "principal", "parts": {}, "verify_visibility_image": "border"}},
-    # a RealSense/Kinect frame ~30 cm from the object (README "Recognise objects in a depth-camera frame"):
+    # a RealSense/Kinect frame ~30 cm from the object (docs/depth-camera.md):
     # --max-range 0.5 --voxel auto --cluster-tolerance auto --max-planes 0 --up 0,-1,0 --reject-margin 1
     "depth-camera": {"pipeline": {"segmentation": {"drop_origin": True, "max_range_m": 0.5, "voxel_leaf_m": "auto",
                                                    "cluster_tolerance_m": "auto", "max_planes": 0},

@@ -7,7 +7,8 @@ landmark updates, consensus initialisation), ``ekf`` (the filter and its named s
 ``consistency`` (NIS bands). The factor-graph backends live in :mod:`semslam.slam.graph` (``GraphSession``, same
 interface as ``SlamSession``; imported on demand: GTSAM).
 
-Elsewhere: feeding a whole dive is :mod:`semslam.run`; the run directory and exports are :mod:`semslam.io`;
+Elsewhere: feeding a whole dive is :mod:`semslam.run`; the run directory and exports are
+:mod:`semslam.run.rundir` and :mod:`semslam.run.export` (detection files: :mod:`semslam.io.detections`);
 evaluation against ground truth, after a run, is :mod:`semslam.evaluation`.
 """
 
