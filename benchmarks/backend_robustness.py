@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from semslam._validation import as_rng
-from semslam.experiments.montecarlo import make_mission
+from semslam.experiments.montecarlo import make_dataset
 from semslam.experiments.outliers import corrupt_detections, outlier_usage
 from semslam.simulation.detections import simulate_detections
 from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config
@@ -61,7 +61,7 @@ def run(n_runs: int, seed0: int, fraction: float, huber_k: float, settings=tuple
     rows = {(v, b): {"on": [], "end": [], "acc": 0, "n": 0} for v in ("clean",) + tuple(settings) for b in bk}
     for i in range(n_runs):
         seed = seed0 + i
-        mission = make_mission(seed)
+        mission = make_dataset(seed)
         dets = simulate_detections(mission, truth_detection_config(mission), seed=as_rng(seed), symmetries=sym)
         variants = {"clean": dets}
         for s in settings:

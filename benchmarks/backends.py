@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from semslam.experiments.montecarlo import make_mission, truth_run
+from semslam.experiments.montecarlo import make_dataset, truth_run
 from semslam.slam import SlamConfig
 from semslam.evaluation.metrics import anees, nees
 
@@ -42,7 +42,7 @@ def run_scenario(name: str, n_runs: int, backends, seed0: int = 0) -> dict:
     rows["ekf-rts"] = {"end_err": [], "end_nees": [], "ate_end": []}
     for i in range(n_runs):
         seed = seed0 + i
-        mission = make_mission(seed, yaw_bias_rad=math.radians(sc["yaw_bias_deg"]))
+        mission = make_dataset(seed, yaw_bias_rad=math.radians(sc["yaw_bias_deg"]))
         for b in backends:
             t0 = time.perf_counter()
             res = truth_run(mission, sc["mode"], cfg, seed, b, sc["surveyed"])
@@ -127,7 +127,7 @@ def write_csv(directory: str, name: str, rows: dict, n_runs: int, seed0: int = 0
 
 def timing(backends, repeats: int = 3) -> str:
     """Best-of-``repeats`` wall time of one pose run of mission 0 per backend (less sensitive to machine load)."""
-    mission = make_mission(0)
+    mission = make_dataset(0)
     cfg = SlamConfig()
     lines = ["| backend | mission (s) | wall, best of %d (s) | real-time factor |" % repeats, "|---|---:|---:|---:|"]
     truth_run(mission, "pose", cfg, 0, "ekf")  # warm-up (numba cache, imports)

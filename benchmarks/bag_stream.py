@@ -30,19 +30,19 @@ def main() -> None:
     args = ap.parse_args()
     from semslam.dataset import write_vehicle_toml
     from semslam.dataset.rosbag_write import topic_map_of, write_bag
-    from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, simulate_dataset
 
     work = Path(args.work)
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    one = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0, with_scans=False)
+    one = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0, with_scans=False)
     loops = max(1, round(args.minutes * 60.0 / one.duration_s))
     cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=loops),
                                     scanner=ScannerConfig(n_lines=args.lines, points_per_line=args.lines,
                                                           only_when_objects_in_view=False))
     cfg = cfg.replace(scanner=dataclasses.replace(cfg.scanner, scan_rate_hz=3.0))
     t = time.perf_counter()
-    mission = simulate_mission(cfg, seed=args.seed, progress=True)
+    mission = simulate_dataset(cfg, seed=args.seed, progress=True)
     t_sim = time.perf_counter() - t
     t = time.perf_counter()
     bag = write_bag(mission, work / "dive", "ros2-mcap")

@@ -53,10 +53,10 @@ import numpy as np
 
 from semslam.experiments.recognition_scoring import score_scan
 from semslam.pipeline import PipelineConfig, ScanRecognizer
-from semslam.pipeline.mission import detect_mission
+from semslam.pipeline.dataset_detection import detect_dataset
 from semslam.pipeline.parts import PartsConfig
 from semslam.recognition import build_database
-from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
+from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_dataset
 from semslam.simulation.cad_models import models_view_clouds, with_resting_up
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
@@ -153,7 +153,7 @@ def run_case(db, models: dict, *, seed: int, scanner: ScannerConfig, descriptor:
         else:
             cfg = SimulatorConfig().replace(world=WorldConfig(clutter=True), trajectory=TrajectoryConfig(loops=loops),
                                             scanner=scanner)
-            mission = simulate_mission(cfg, seed=seed + 1000 * k, objects={lab: models[lab] for lab in group})
+            mission = simulate_dataset(cfg, seed=seed + 1000 * k, objects={lab: models[lab] for lab in group})
         sims.append(mission)
 
         def score(rec, cloud, res, m=mission, k=k):
@@ -165,7 +165,7 @@ def run_case(db, models: dict, *, seed: int, scanner: ScannerConfig, descriptor:
                     row["background_kind"] = background_kind(m, row["truth_object"])
                 records.append(row)
 
-        detect_mission(occluded(mission, occlusion, seed), recognizer, seed=seed, on_scan=score,
+        detect_dataset(occluded(mission, occlusion, seed), recognizer, seed=seed, on_scan=score,
                        up_from_attitude=upright)
     return records, sims
 
@@ -269,7 +269,7 @@ def main(argv=None) -> None:
                          "('all', default; '' = none)")
     ap.add_argument("--upright", action="store_true",
                     help="pose the classes upright about each scan's up from the vehicle's attitude (the database "
-                         "records each class's up from its resting pose; detect_mission(up_from_attitude=True))")
+                         "records each class's up from its resting pose; detect_dataset(up_from_attitude=True))")
     ap.add_argument("--records", default=None, metavar="FILE.jsonl",
                     help="write every scored cluster of the main setting (one JSON object per line)")
     args = ap.parse_args(argv)

@@ -70,15 +70,15 @@ def main() -> None:
 
     dives = []
     if "batch" not in args.skip:
-        from semslam.simulation import SimulatorConfig, simulate_mission
-        from semslam.dataset import write_mission
+        from semslam.simulation import SimulatorConfig, simulate_dataset
+        from semslam.dataset import write_dataset
         from semslam.simulation.builtin_db import builtin_database
 
         builtin_database(seed=0)  # the disk cache, once, outside the timings
         t = time.perf_counter()
         for i in range(args.dives):
-            m = simulate_mission(SimulatorConfig.quick(), seed=i, scan_interval_s=1.0)
-            dives.append(str(write_mission(m, work / "dives" / f"dive{i:03d}")))
+            m = simulate_dataset(SimulatorConfig.quick(), seed=i, scan_interval_s=1.0)
+            dives.append(str(write_dataset(m, work / "dives" / f"dive{i:03d}")))
         print(f"simulated {len(dives)} dives ({m.duration_s:.0f} s, {len(m.scans)} scans each) in "
               f"{time.perf_counter() - t:.1f} s", file=sys.stderr)
 

@@ -115,12 +115,12 @@ def describe_ab(reps: int) -> None:
     from semslam.recognition import build_database
     from semslam.recognition.plausibility import cluster_extent_m
     from semslam.segmentation.scene import segment_scene
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_dataset
 
     views, classes = builtin_view_clouds(seed=0)
     db = build_database(views, classes, seed=0)
     rec = ScanRecognizer(db)
-    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0)
+    mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0)
     step = max(1, len(mission.scans) // 20)
     clusters = [c for r in mission.scans[::step][:20]
                 for c in segment_scene(mission.load_scan(r.scan_id), rec.config.segmentation, seed=0).clusters]

@@ -29,12 +29,12 @@ def main() -> None:
                     help="fly pose+heading on the unbiased missions too (default: a yaw bias drawn from its prior)")
     args = ap.parse_args()
 
-    from semslam.experiments.montecarlo import make_mission
+    from semslam.experiments.montecarlo import make_dataset
     from semslam.experiments.outage import outage_table, run_outage_montecarlo
     from semslam.evaluation.motion_noise import measure_unaided_motion
 
     if args.measure:
-        missions = [make_mission(100 + i) for i in range(args.measure_runs)]
+        missions = [make_dataset(100 + i) for i in range(args.measure_runs)]
         d = missions[0].vehicle.dvl
         m = measure_unaided_motion([x.dvl for x in missions], noise_sigma_mps=d.noise_abs_mps + d.noise_rel * 0.3)
         print(f"measured on {args.measure_runs} missions (seeds 100..): unaided velocity random walk "

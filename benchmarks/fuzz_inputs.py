@@ -62,9 +62,9 @@ def base_dive(root: Path, *, seed: int = 0, scans: bool = True):
     """A quick simulated dive (a few scans) and its bags: ``root/ros1/dive.bag`` and ``root/mcap/dive`` (ROS 2
     MCAP), each with the companion files the recorder leaves beside it. Returns (dataset, {fmt: bag path})."""
     from semslam.dataset.rosbag_write import write_bag
-    from semslam.simulation import SimulatorConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, simulate_dataset
 
-    ds = simulate_mission(SimulatorConfig.quick(), seed=seed, with_scans=scans, scan_interval_s=4.0)
+    ds = simulate_dataset(SimulatorConfig.quick(), seed=seed, with_scans=scans, scan_interval_s=4.0)
     bags = {}
     for fmt, rel in (("ros1", "ros1/dive.bag"), ("ros2-mcap", "mcap/dive")):
         path = root / rel

@@ -42,7 +42,7 @@ def _pct(x) -> str:
 def warm(args) -> None:
     from semslam.cli._inputs import load_dataset
     from semslam.pipeline import PipelineConfig, ScanRecognizer
-    from semslam.pipeline.mission import scan_seed
+    from semslam.pipeline.dataset_detection import scan_seed
     from semslam.recognition import load_database
 
     run = Path(args.run)

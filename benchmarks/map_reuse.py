@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from semslam.simulation import SimulatorConfig, simulate_mission  # noqa: E402
+from semslam.simulation import SimulatorConfig, simulate_dataset  # noqa: E402
 from semslam.simulation.truth_slam import run_truth_slam  # noqa: E402
 from semslam.slam import read_survey  # noqa: E402
 from semslam.run.export import write_landmarks_json  # noqa: E402
@@ -34,8 +34,8 @@ def one(seed: int, gps: int, work: Path) -> dict:
     base = SimulatorConfig()
     cfg = base.replace(trajectory=dataclasses.replace(base.trajectory, loops=1),
                        fixes=dataclasses.replace(base.fixes, gps_count=gps))
-    d1 = simulate_mission(cfg, seed=seed, with_scans=False)
-    d2 = simulate_mission(cfg, seed=seed + 1000, world_seed=seed, with_scans=False)
+    d1 = simulate_dataset(cfg, seed=seed, with_scans=False)
+    d2 = simulate_dataset(cfg, seed=seed + 1000, world_seed=seed, with_scans=False)
     r1 = run_truth_slam(d1, mode="pose", seed=seed)
     path = write_landmarks_json(r1, work / f"map{seed}.json")
     alone = run_truth_slam(d2, mode="pose", seed=seed + 1000)

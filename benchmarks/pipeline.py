@@ -103,7 +103,7 @@ def main() -> int:
     from semslam.pipeline import ScanRecognizer
     from semslam.recognition import build_database
     from semslam.recognition.storage import save_database
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, builtin_view_clouds, simulate_dataset
 
     from semslam.pipeline import PipelineConfig
     from semslam.pose import PoseConfig
@@ -120,7 +120,7 @@ def main() -> int:
     recognizer.warm_up()
     warm_ms = (time.perf_counter() - t0) * 1e3
     use_pcl = not args.no_pcl and os.access(PCL_REF, os.X_OK)
-    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=args.seed)
+    mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=args.seed)
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         inputs = []

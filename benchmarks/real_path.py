@@ -38,7 +38,7 @@ from semslam.dataset import write_vehicle_toml  # noqa: E402
 from semslam.dataset.rosbag_write import TIME_ORIGIN_NS, topic_map_of, write_bag  # noqa: E402
 from semslam.run import open_dive, run_stream  # noqa: E402
 from semslam.run.dive import run_dive, write_outcome  # noqa: E402
-from semslam.simulation import SimulatorConfig, simulate_mission  # noqa: E402
+from semslam.simulation import SimulatorConfig, simulate_dataset  # noqa: E402
 from semslam.simulation.builtin_db import builtin_database  # noqa: E402
 from semslam.slam import MODES
 from semslam.io.detections import read_detections_jsonl
@@ -52,7 +52,7 @@ def make_dive(seed: int, gps: int, out: Path, fmt: str, loops: int = 3, scan_int
     cfg = base.replace(world=dataclasses.replace(base.world, tank_depth_m=float(rng.uniform(4.5, 11.5))),
                        trajectory=dataclasses.replace(base.trajectory, loops=loops),
                        fixes=dataclasses.replace(base.fixes, gps_count=gps))
-    m = simulate_mission(cfg, seed=seed, scan_interval_s=scan_interval_s)
+    m = simulate_dataset(cfg, seed=seed, scan_interval_s=scan_interval_s)
     bag = out / (f"dive{seed}.bag" if fmt == "ros1" else f"dive{seed}")
     write_bag(m, bag, fmt)
     write_vehicle_toml(m.vehicle, Path(str(bag) + ".vehicle.toml"))

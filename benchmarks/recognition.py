@@ -26,7 +26,7 @@ import numpy as np
 def mission_pr(args) -> None:
     from semslam.pipeline import PipelineConfig, ScanRecognizer
     from semslam.simulation.builtin_db import builtin_database
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_dataset
     from semslam.simulation.truth import cluster_truth
 
     db = builtin_database(seed=0)
@@ -40,7 +40,7 @@ def mission_pr(args) -> None:
     print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     tot = np.zeros(5)
     for seed, clutter in [(s, False) for s in args.seeds] + [(s, True) for s in args.clutter_seeds]:
-        m = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
+        m = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
                                                        world=WorldConfig(clutter=clutter)), seed=seed)
         n_obj = n_det = n_ok = n_rec = n_clut = n_clut_fa = 0
         t = 0.0

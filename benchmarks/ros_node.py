@@ -29,10 +29,10 @@ def _load() -> str:
 
 
 def make_dive(work: Path, points: int, seed: int = 4) -> dict:
-    from semslam.dataset import read_mission, write_mission, write_vehicle_toml
+    from semslam.dataset import read_dataset, write_dataset, write_vehicle_toml
     from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
     from semslam.recognition.storage import save_database
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
     from semslam.simulation.builtin_db import builtin_database
     from semslam.simulation.config import ScannerConfig
 
@@ -44,7 +44,7 @@ def make_dive(work: Path, points: int, seed: int = 4) -> dict:
     d.mkdir(parents=True)
     cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
                                     scanner=ScannerConfig(n_lines=points, points_per_line=points, scan_rate_hz=2.0))
-    mission = read_mission(write_mission(simulate_mission(cfg, seed=seed), d / "mission"))
+    mission = read_dataset(write_dataset(simulate_dataset(cfg, seed=seed), d / "mission"))
     write_bag(mission, files["bag"], "ros1")
     files["topics"].write_text(SEMSLAM_TOPICS.to_toml(), encoding="utf-8")
     write_vehicle_toml(mission.vehicle, files["vehicle"])

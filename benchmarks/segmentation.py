@@ -168,9 +168,9 @@ def main() -> None:
 
 def simulated(n_scans: int, repeats: int) -> None:
     from semslam.segmentation import segment_scene
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    mission = simulate_mission(
+    mission = simulate_dataset(
         SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=0
     )
     step = max(1, len(mission.scans) // n_scans)

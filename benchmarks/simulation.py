@@ -17,7 +17,7 @@ from semslam.simulation import (
     SimulatorConfig,
     build_world,
     builtin_objects,
-    simulate_mission,
+    simulate_dataset,
 )
 from semslam.simulation._ray_kernels import RayCaster
 from semslam.simulation.simulate import mission_trajectory
@@ -42,19 +42,19 @@ def main() -> None:
     rows = []
     rows.append(("build the four meshes (once per process)", *_time(builtin_objects), ""))
     rows.append(("warm-up: tiny mission (numba kernels loaded from cache)",
-                 *_time(lambda: simulate_mission(SimulatorConfig.quick(), seed=0)), ""))
+                 *_time(lambda: simulate_dataset(SimulatorConfig.quick(), seed=0)), ""))
     m = None
 
     def full():
         nonlocal m
-        m = simulate_mission(cfg, seed=0)
+        m = simulate_dataset(cfg, seed=0)
 
     wall, cpu = _time(full, args.repeat)
     rows.append(("mission, all scans and sensors", wall, cpu,
                  f"{len(m.scans)} scans, {np.mean([s.n_points for s in m.scans]):.0f} points/scan, {m.duration_s:.0f} s, "
                  f"{len(m.scans) / wall:.1f} scans/s"))
     rows.append(("mission, navigation only (with_scans=False)",
-                 *_time(lambda: simulate_mission(cfg, seed=1, with_scans=False), 3), ""))
+                 *_time(lambda: simulate_dataset(cfg, seed=1, with_scans=False), 3), ""))
     world = build_world(cfg.world, builtin_objects(), seed=0)
     traj = mission_trajectory(world, cfg, np.random.default_rng(0))
     scanner = LaserScanner(cfg.scanner)

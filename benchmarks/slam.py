@@ -15,7 +15,7 @@ from semslam.geometry import RigidTransform, rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
 from semslam.slam.association import innovation, measurement_from_detection
 from semslam.slam.ekf import SemanticEkf
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 
 
 def _map(n_landmarks: int, rng) -> SemanticEkf:
@@ -79,11 +79,11 @@ def main() -> None:
     print("\n## Mission processing speed (truth-based detections generated inside run_truth_slam; best of 3)\n")
     print("| mission | mode | mission (s) | wall (s) | real-time factor |")
     print("|---|---|---|---|---|")
-    missions = [("synthetic square, 3 loops", square_mission(seed=0), {})]
-    from semslam.experiments.montecarlo import make_mission
+    missions = [("synthetic square, 3 loops", square_dataset(seed=0), {})]
+    from semslam.experiments.montecarlo import make_dataset
     from semslam.simulation.truth_slam import builtin_symmetries
 
-    missions.append(("simulator default (3 loops)", make_mission(0, source="simulator"), builtin_symmetries()))
+    missions.append(("simulator default (3 loops)", make_dataset(0, source="simulator"), builtin_symmetries()))
     for name, m, sym in missions:
         run_truth_slam(m, mode="pose", seed=0, symmetries=sym)  # warm-up (numba cache)
         for mode in ("dr", "position", "pose", "pose+heading"):

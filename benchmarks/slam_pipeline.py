@@ -15,9 +15,9 @@ import math
 import numpy as np
 
 from semslam.pipeline import ScanRecognizer
-from semslam.pipeline.mission import detect_mission
+from semslam.pipeline.dataset_detection import detect_dataset
 from semslam.simulation.builtin_db import builtin_database
-from semslam.simulation import simulate_mission
+from semslam.simulation import simulate_dataset
 from semslam.simulation.truth_slam import builtin_symmetries
 from semslam.slam import MODES
 from semslam.run import run_slam
@@ -35,8 +35,8 @@ def main() -> None:
     print("| seed | " + " | ".join(f"{m} online / smoothed (m)" for m in MODES) + " |")
     print("|---" * (len(MODES) + 1) + "|")
     for seed in range(args.first, args.first + args.missions):
-        mission = simulate_mission(seed=seed)
-        dets = detect_mission(mission, recognizer, seed=seed).detections_by_scan  # reliable only, as the demo
+        mission = simulate_dataset(seed=seed)
+        dets = detect_dataset(mission, recognizer, seed=seed).detections_by_scan  # reliable only, as the demo
         cells = []
         for mode in MODES:
             r = run_slam(mission, dets, mode=mode, symmetries=builtin_symmetries())

@@ -11,7 +11,7 @@ from ._validation import as_float_array
 from .errors import InputError
 
 
-#: names of a per-point time field, in order of preference: seconds from the scan's start in a mission directory,
+#: names of a per-point time field, in order of preference: seconds from the scan's start in a dataset directory,
 #: the field names drivers use in a PointCloud2 (decoded to seconds by :mod:`semslam.io.ros.pointcloud2`)
 POINT_TIME_FIELDS = ("t", "time", "timestamp", "time_offset", "offset_time", "time_offset_s")
 

@@ -8,7 +8,7 @@ Run directory layout (every file written atomically)::
       config.json          resolved configuration of every stage, and the seed
       db.npz               the built-in view database (Kinect-like views)
       evaluation/          leave-one-out results (Tables 1 and 2): loo_<descriptor>_<classifier>.json
-      mission/             the simulated mission (docs/mission-format.md)
+      mission/             the simulated mission (docs/dataset-format.md)
       detections.jsonl     one JSON line per detection (with scan_id and stamp_s)
       recognition.json     every cluster of every scan against the ground truth, pose errors, timings
       fig3_scan.npz        the scan drawn in Fig. 3 (points, cluster labels)
@@ -117,8 +117,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     Raises :class:`~semslam.errors.InputError` if ``out_dir`` is a file, a non-empty directory semslam did not
     write, or an earlier run (unless ``overwrite``): a run never mixes its files with another's.
     """
-    from .dataset import read_mission, write_mission
-    from .simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from .dataset import read_dataset, write_dataset
+    from .simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
     cfg = DemoConfig() if config is None else config
     final = Path(out_dir)
@@ -138,12 +138,12 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
 
         # 2. the mission
         sim_cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=cfg.n_loops))
-        mission = stages.run("simulate mission", simulate_mission, sim_cfg, seed=cfg.seed, progress=progress,
+        mission = stages.run("simulate mission", simulate_dataset, sim_cfg, seed=cfg.seed, progress=progress,
                              objects=objects)
-        stages.run("write mission", write_mission, mission, out / "mission")
+        stages.run("write mission", write_dataset, mission, out / "mission")
         # from here on the demo works on the mission as written (float32 scans), exactly what `semslam detect` and
         # `semslam slam` read from the run directory: the commands reproduce the demo's numbers
-        mission = read_mission(out / "mission")
+        mission = read_dataset(out / "mission")
 
         # 3-4. every scan recognised and SLAM in every mode, in one pass of the streaming runner (`semslam run`'s)
         rec_out, slam_results = stages.run("recognise every scan, SLAM in every mode", _run_dive, mission, db, cfg,

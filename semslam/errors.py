@@ -65,4 +65,4 @@ class BagError(SemslamError):
 
 
 class DatasetError(SemslamError):
-    """A dataset (sensor logs, vehicle description, mission directory) is missing, malformed or inconsistent."""
+    """A dataset (sensor logs, vehicle description, dataset directory) is missing, malformed or inconsistent."""

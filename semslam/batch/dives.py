@@ -1,4 +1,4 @@
-"""Many dives, one call: :func:`run_batch` processes every dive (bag or mission directory) into its own run
+"""Many dives, one call: :func:`run_batch` processes every dive (bag or dataset directory) into its own run
 directory ``RUNS/<dive name>/`` as Dask tasks (or serially), then writes the batch's tables and index::
 
     RUNS/
@@ -55,7 +55,7 @@ class BatchResult:
 
 
 def dive_name(dive: str | Path) -> str:
-    """The run directory name of a dive: a mission directory's name, a bag file's name without its extension."""
+    """The run directory name of a dive: a dataset directory's name, a bag file's name without its extension."""
     p = Path(dive)
     name = p.name if p.is_dir() else p.stem
     return name or p.resolve().name
@@ -72,7 +72,7 @@ def run_batch(dives: Sequence[str | Path], out: str | Path, process: Callable[[P
     from .engine import TaskFailed, map_tasks
 
     if isinstance(dives, (str, Path)) or not len(dives):
-        raise InputError(f"The 'DIVES' argument of semslam batch must name at least one bag or mission directory. "
+        raise InputError(f"The 'DIVES' argument of semslam batch must name at least one bag or dataset directory. "
                          f"Got {dives!r} instead.")
     root = Path(out)
     if root.exists() and not root.is_dir():

@@ -1,4 +1,4 @@
-"""Inputs shared by the commands: datasets (mission directories, ``synthetic:SEED``), vehicle files and
+"""Inputs shared by the commands: datasets (dataset directories, ``synthetic:SEED``), vehicle files and
 ``--config`` files (TOML or JSON tables)."""
 
 from __future__ import annotations
@@ -9,26 +9,26 @@ from ..errors import ConfigError, InputError
 
 
 def load_dataset(spec: str, vehicle: str | None = None):
-    """A mission directory (or ``synthetic:SEED``, the analytic square mission), with its vehicle description
+    """A dataset directory (or ``synthetic:SEED``, the analytic square mission), with its vehicle description
     replaced by the ``vehicle`` file when given (``girona500`` for the documented defaults)."""
     from dataclasses import replace
 
-    from ..dataset import VehicleDescription, read_mission, read_vehicle_toml
+    from ..dataset import VehicleDescription, read_dataset, read_vehicle_toml
 
     if spec.startswith("synthetic:"):
-        from ..simulation.synthetic import square_mission
+        from ..simulation.synthetic import square_dataset
 
         try:
             seed = int(spec.split(":", 1)[1])
         except ValueError:
-            raise InputError(f"The MISSION argument must be a directory or synthetic:SEED. Got {spec!r} instead.") from None
-        ds = square_mission(seed=seed)
+            raise InputError(f"The DATASET argument must be a directory or synthetic:SEED. Got {spec!r} instead.") from None
+        ds = square_dataset(seed=seed)
     else:
         path = Path(spec)
         if not path.is_dir():
-            raise InputError(f"The MISSION argument must be an existing mission directory or synthetic:SEED. "
+            raise InputError(f"The DATASET argument must be an existing dataset directory or synthetic:SEED. "
                              f"Got {spec!r} instead.")
-        ds = read_mission(path)
+        ds = read_dataset(path)
     if vehicle:
         v = VehicleDescription.girona500() if vehicle == "girona500" else read_vehicle_toml(vehicle)
         ds = replace(ds, vehicle=v)

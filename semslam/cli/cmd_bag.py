@@ -1,5 +1,5 @@
 """``semslam bag info BAG`` (topics, types, counts, rates and a suggested topic map) and ``semslam bag export BAG
---out MISSION`` (a ROS 1 / ROS 2 bag into a mission directory, streamed: bounded memory)."""
+--out DATASET`` (a ROS 1 / ROS 2 bag into a dataset directory, streamed: bounded memory)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 
 
 def register(subparsers, common) -> None:
-    p = subparsers.add_parser("bag", parents=[common], help="inspect a ROS bag, or convert it to a mission directory",
+    p = subparsers.add_parser("bag", parents=[common], help="inspect a ROS bag, or convert it to a dataset directory",
                               description="ROS 1 (.bag) and ROS 2 (sqlite3, mcap) bags, read without a ROS install.")
     sub = p.add_subparsers(dest="bag_command", metavar="ACTION")
     info = sub.add_parser("info", parents=[common], help="topics, types, counts, rates; a suggested topic map")
@@ -15,13 +15,13 @@ def register(subparsers, common) -> None:
     info.add_argument("--msg-dir", action="append", default=[], metavar="DIR",
                       help="directory of PKG/msg/NAME.msg definitions for types the bag does not embed; repeatable")
     info.set_defaults(func=run_info)
-    exp = sub.add_parser("export", parents=[common], help="convert a bag to a mission directory")
+    exp = sub.add_parser("export", parents=[common], help="convert a bag to a dataset directory")
     exp.add_argument("bag", metavar="BAG")
-    exp.add_argument("--out", required=True, metavar="MISSION", help="mission directory to create")
+    exp.add_argument("--out", required=True, metavar="DATASET", help="dataset directory to create")
     exp.add_argument("--topics", help="topic map (TOML; default: `semslam bag info`'s suggestion)")
     exp.add_argument("--vehicle", help="vehicle description (TOML; default: the Girona 500-class defaults)")
     exp.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="as for `bag info`")
-    exp.add_argument("--overwrite", action="store_true", help="replace MISSION if semslam wrote it")
+    exp.add_argument("--overwrite", action="store_true", help="replace DATASET if semslam wrote it")
     exp.set_defaults(func=run_export)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -62,9 +62,9 @@ def run_export(args: argparse.Namespace) -> int:
     vehicle = read_vehicle_toml(args.vehicle) if args.vehicle else None
     out = export_bag(args.bag, args.out, topic_map=tmap, vehicle=vehicle, msg_dirs=args.msg_dir,
                      overwrite=args.overwrite, progress=not getattr(args, "json", False))
-    from ..dataset import read_mission
+    from ..dataset import read_dataset
 
-    ds = read_mission(out)
+    ds = read_dataset(out)
     payload = {"directory": str(out), "n_scans": len(ds.scans), "n_attitude": len(ds.attitude),
                "n_dvl": len(ds.dvl), "n_depth": len(ds.depth), "duration_s": ds.duration_s}
     emit(args, payload, lambda: f"wrote {out}: {ds.duration_s:.1f} s, {len(ds.scans)} scans, attitude {len(ds.attitude)}"

@@ -1,4 +1,4 @@
-"""``semslam batch DIVES... --db DB --out RUNS``: ``semslam run`` on many dives (bags or mission directories) as Dask
+"""``semslam batch DIVES... --db DB --out RUNS``: ``semslam run`` on many dives (bags or dataset directories) as Dask
 tasks, one run directory per dive, then RUNS/summary.csv, summary.md, index.html (see
 :mod:`semslam.batch.dives`). Default engine: a local cluster of one worker process per core (``--workers``);
 ``--scheduler ADDRESS``: an existing Dask cluster whose workers see the same files."""
@@ -21,7 +21,7 @@ def register(subparsers, common) -> None:
                                           "table (summary.csv, summary.md) and index.html linking each report. "
                                           "Dives whose run directory is complete are skipped unless --overwrite. "
                                           "Exit status 1 when any dive failed (its error is in the summary).")
-    p.add_argument("dives", nargs="+", metavar="DIVE", help="ROS 1/2 bag or mission directory")
+    p.add_argument("dives", nargs="+", metavar="DIVE", help="ROS 1/2 bag or dataset directory")
     p.add_argument("--db", required=True, metavar="DB", help="view database (.npz), or 'builtin'")
     p.add_argument("--out", required=True, metavar="RUNS", help="directory of the run directories and the summary")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -83,7 +83,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     modes = rc.run.modes
     for d in args.dives:
         if not Path(d).exists():
-            raise InputError(f"The dive {d!r} does not exist: give ROS bags or mission directories.")
+            raise InputError(f"The dive {d!r} does not exist: give ROS bags or dataset directories.")
     if args.db != "builtin" and not Path(args.db).is_file():
         raise InputError(f"The '--db' option must name a view database file (.npz) or 'builtin'. Got {args.db!r}, "
                          "which is not a file.")

@@ -1,7 +1,7 @@
-"""``semslam detect BAG|MISSION --db DB --out detections.jsonl``: every scan of a dive (a ROS bag, streamed, or a
-mission directory) through the recognition pipeline on the runner of ``semslam run``
+"""``semslam detect BAG|DATASET --db DB --out detections.jsonl``: every scan of a dive (a ROS bag, streamed, or a
+dataset directory) through the recognition pipeline on the runner of ``semslam run``
 (:func:`semslam.run.dive.detect_dive`), one detection per JSON line, ready for
-``semslam slam MISSION --detections detections.jsonl``."""
+``semslam slam DATASET --detections detections.jsonl``."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
     p = subparsers.add_parser(
         "detect", parents=[common], help="recognise and localise objects in every scan of a dive",
-        description="Run the recognition pipeline on every scan of a dive (ROS 1/2 bag or mission directory) and write "
+        description="Run the recognition pipeline on every scan of a dive (ROS 1/2 bag or dataset directory) and write "
                     "the detections "
                     "(JSON lines, each stamped with its own points' acquisition time) for `semslam slam --detections`. "
                     "The resolved pipeline configuration is written beside them (OUT.config.json).")
-    p.add_argument("mission", metavar="BAG|MISSION", help="ROS 1/2 bag or mission directory (or synthetic:SEED)")
+    p.add_argument("dataset", metavar="BAG|DATASET", help="ROS 1/2 bag or dataset directory (or synthetic:SEED)")
     p.add_argument("--db", required=True, metavar="DB", help="view database (.npz), or 'builtin'")
     p.add_argument("--out", required=True, metavar="FILE.jsonl", help="detections to write (atomically)")
     add_config_options(p, "the pipeline")  # OUT.config.json and a bare PipelineConfig table are read too
@@ -49,13 +49,13 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     config_out = out.with_name(out.name + ".config.json")
-    inputs = (args.mission, args.db, args.config, args.vehicle, args.topics, *args.msg_dir)
+    inputs = (args.dataset, args.db, args.config, args.vehicle, args.topics, *args.msg_dir)
     for path in (out, config_out):  # before the work (semslam._outdir)
         check_output_file(path, overwrite=args.overwrite, inputs=inputs)
     rc = run_config_from_args(args)  # --preset, --config, then the explicit options (semslam.run.config)
     config, run_opts = rc.pipeline_config(), rc.run
     db = load_database_arg(args.db)  # before the dive is read: a missing database stops at once
-    found = detect_dive(_source(args.mission), db=db, topics=args.topics, vehicle=args.vehicle, msg_dirs=args.msg_dir,
+    found = detect_dive(_source(args.dataset), db=db, topics=args.topics, vehicle=args.vehicle, msg_dirs=args.msg_dir,
                         pipeline_config=config, seed=run_opts.seed, keep_unreliable=run_opts.keep_unreliable,
                         up_from_attitude=run_opts.up_from_attitude,
                         progress=not args.no_progress and not getattr(args, "json", False))
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         write_detections_jsonl(tmp, found.detections_by_scan)
     resolved = {"preset": rc.preset, "pipeline": config.to_dict(), "seed": run_opts.seed, "db": str(args.db),
                 "keep_unreliable": run_opts.keep_unreliable, "up_from_attitude": run_opts.up_from_attitude,
-                "mission": str(args.mission)}
+                "dataset": str(args.dataset)}
     with staged_output_file(config_out, overwrite=args.overwrite, inputs=inputs) as tmp:
         atomic_write_text(tmp, json.dumps(to_jsonable(resolved), indent=2) + "\n")
     summary = found.detection_summary()
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _source(spec: str):
-    """A bag or mission directory as given; ``synthetic:SEED`` (the analytic square mission) as a dataset."""
+    """A bag or dataset directory as given; ``synthetic:SEED`` (the analytic square mission) as a dataset."""
     if spec.startswith("synthetic:"):
         from ._inputs import load_dataset
 

@@ -1,4 +1,4 @@
-"""``semslam run BAG|MISSION --db DB --out RUN``: the whole chain on a recorded dive, streamed from the bag (nothing
+"""``semslam run BAG|DATASET --db DB --out RUN``: the whole chain on a recorded dive, streamed from the bag (nothing
 converted on disk): every scan recognised, SLAM in every mode (or one) in one pass, the run directory (trajectories
 as TUM and KITTI, the map as JSON/CSV/PLY, run.mcap for Foxglove/RViz), the health verdict and the report. The
 library call is :func:`semslam.run.dive.run_dive`."""
@@ -15,11 +15,11 @@ EXIT_BAD_VERDICT = 3
 def register(subparsers, common) -> None:
     from ._inputs import add_config_options
 
-    p = subparsers.add_parser("run", parents=[common], help="detect + SLAM + report on a bag or a mission directory",
-                              description="Run the whole chain on a recorded dive (ROS 1/2 bag or mission directory): "
+    p = subparsers.add_parser("run", parents=[common], help="detect + SLAM + report on a bag or a dataset directory",
+                              description="Run the whole chain on a recorded dive (ROS 1/2 bag or dataset directory): "
                                           "recognition on every scan, SLAM in every mode (or one), the health "
                                           "verdict and the report.")
-    p.add_argument("dive", metavar="BAG|MISSION")
+    p.add_argument("dive", metavar="BAG|DATASET")
     p.add_argument("--db", required=True, metavar="DB", help="view database (.npz), or 'builtin'")
     p.add_argument("--out", required=True, metavar="RUN", help="run directory to create (new, or an earlier run with "
                                                                 "--overwrite)")

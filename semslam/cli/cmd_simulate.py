@@ -1,4 +1,4 @@
-"""``semslam simulate``: simulate a mission and write its directory (see docs/mission-format.md)."""
+"""``semslam simulate``: simulate a mission and write its directory (see docs/dataset-format.md)."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ def register(subparsers, common) -> None:
         "simulate", parents=[common],
         help="simulate a mission (tank, four fittings, vehicle, DVL/AHRS/depth, laser scans) into a directory",
         description="Simulate a Girona 500-like mission over the four PVC fittings in a CIRS-like tank and "
-                    "write it as a mission directory (mission.json, sensor CSVs, scans/*.pcd, ground_truth/).",
+                    "write it as a dataset directory (mission.json, sensor CSVs, scans/*.pcd, ground_truth/).",
     )
-    p.add_argument("--out", required=True, metavar="DIR", help="mission directory (or bag) to create")
+    p.add_argument("--out", required=True, metavar="DIR", help="dataset directory (or bag) to create")
     p.add_argument("--format", choices=("mission", "ros1", "ros2-mcap", "ros2-sqlite3"), default="mission",
-                   help="a mission directory (default, with ground truth), or a ROS bag as a vehicle would record it "
+                   help="a dataset directory (default, with ground truth), or a ROS bag as a vehicle would record it "
                         "(no ground truth; OUT.vehicle.toml and OUT.topics.toml are written beside it)")
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed -> identical files; default 0)")
     p.add_argument("--loops", type=int, default=None, help="loops around the objects (default 3; 1 with --quick)")
@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
 
     from .._outdir import check_output_dir, check_output_file, staged_output_file
     from ..errors import DatasetError
-    from ..simulation import SimulatorConfig, simulate_mission
-    from ..dataset import write_mission
+    from ..simulation import SimulatorConfig, simulate_dataset
+    from ..dataset import write_dataset
     from ..simulation.simulate import DEFAULT_SCAN_INTERVAL_S
     from ._output import emit
 
@@ -69,10 +69,10 @@ def run(args: argparse.Namespace) -> int:
     interval = args.scan_interval
     if interval is None:
         interval = max(DEFAULT_SCAN_INTERVAL_S, 1.0 / cfg.scanner.scan_rate_hz) if cfg.scanner.scan_rate_hz > 0 else DEFAULT_SCAN_INTERVAL_S
-    mission = simulate_mission(cfg, seed=args.seed, with_scans=not args.no_scans, scan_interval_s=interval,
+    mission = simulate_dataset(cfg, seed=args.seed, with_scans=not args.no_scans, scan_interval_s=interval,
                                progress=not getattr(args, "json", False))
     if args.format == "mission":
-        out = write_mission(mission, args.out, overwrite=args.overwrite)
+        out = write_dataset(mission, args.out, overwrite=args.overwrite)
     else:
         from .._atomic import atomic_write_text
         from ..dataset import write_vehicle_toml

@@ -17,9 +17,9 @@ def register(subparsers, common) -> None:
     from ._scheduler_tls import add_tls_options
 
     p = subparsers.add_parser("slam", parents=[common], help="run the semantic EKF-SLAM on a mission",
-                              description="Run the semantic EKF-SLAM on a mission directory (or 'synthetic:SEED') "
+                              description="Run the semantic EKF-SLAM on a dataset directory (or 'synthetic:SEED') "
                                           "and write trajectory.csv, landmarks.csv, updates.csv, metrics.json.")
-    p.add_argument("mission", help="mission directory, or synthetic:SEED for the built-in analytic square mission")
+    p.add_argument("dataset", metavar="DATASET", help="dataset directory, or synthetic:SEED for the built-in analytic square dataset")
     p.add_argument("--mode", choices=MODE_CHOICES, help="filter mode (default pose, or --config's [run] modes; all: "
                                                         "one sub-directory per mode)")
     p.add_argument("--out", required=True, help="run directory to write (new, or an earlier run with --overwrite)")
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from ._inputs import load_dataset, run_config_from_args
     from ._output import emit
 
-    mission = load_dataset(args.mission, args.vehicle)
+    mission = load_dataset(args.dataset, args.vehicle)
     rc = run_config_from_args(args, default_modes=("pose",))  # --preset, --config, the explicit options
     cfg = rc.slam_config()
     survey = None
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     final = Path(args.out)
     payload = {}
     with staged_output_dir(final, overwrite=args.overwrite,
-                           inputs=(args.mission, args.detections, args.config, args.vehicle, args.db,
+                           inputs=(args.dataset, args.detections, args.config, args.vehicle, args.db,
                                    args.survey)) as out:
         if dets is None:  # detections drawn from the simulator's truth (experiments): one run per mode
             from ..simulation.truth_slam import run_truth_slam

@@ -72,6 +72,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # one (logging, numba, weakref.finalize) still run after it. Registered once however often main() runs.
     atexit.unregister(gc.freeze)
     atexit.register(gc.freeze)
+    _REPORTED[0] = False
     if argv is None:
         argv = sys.argv[1:]
     try:  # building the parsers imports the command's module: a Ctrl-C then is an interrupt like any other
@@ -106,27 +107,79 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return _interrupted()
+    except Exception as exc:
+        # after a Ctrl-C, whatever the interrupt left behind: wrapped by a compiled kernel (numba: a SystemError
+        # from it) or a library module half-imported (a NameError in its __init__ later)
+        if _from_interrupt(exc) or _SIGINT_SEEN[0]:
+            return _interrupted()
+        raise
     finally:
         if pause_gc:
             gc.enable()
 
 
+#: whether the command (:func:`console`, its SIGINT handler) received a Ctrl-C, and whether it was reported
+_SIGINT_SEEN = [False]
+_REPORTED = [False]
+
+
 def _interrupted() -> int:
-    """A Ctrl-C: one line, exit status 130 (128 + SIGINT). A second Ctrl-C while semslam cleans up (staging
-    folders are removed by the code the interrupt unwound) is one line too."""
-    print("semslam: interrupted", file=sys.stderr)
+    """A Ctrl-C: one line (once), exit status 130 (128 + SIGINT)."""
+    if not _REPORTED[0]:
+        print("semslam: interrupted", file=sys.stderr)
+        _REPORTED[0] = True
     return 130
+
+
+def _on_sigint(signum, frame) -> None:
+    _SIGINT_SEEN[0] = True
+    raise KeyboardInterrupt
+
+
+def _unraisable(hook):
+    """``sys.unraisablehook`` that stays silent about a KeyboardInterrupt (raised in a finaliser or a callback
+    after a Ctrl-C: the command reports the interrupt itself) and passes anything else to ``hook``."""
+    def silent(unraisable) -> None:
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            hook(unraisable)
+
+    return silent
+
+
+def _from_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by a KeyboardInterrupt (its chain of causes and contexts)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def console() -> None:
     """The ``semslam`` command (``[project.scripts]``): :func:`main`, whose interrupts at any moment — start-up
     included — end with one line and status 130, never a traceback. Once main returns, further Ctrl-Cs are
     ignored: the interpreter's exit (atexit handlers of numba, Dask, logging) is not interrupted half-way."""
+    signal.signal(signal.SIGINT, _on_sigint)
+    sys.unraisablehook = _unraisable(sys.unraisablehook)
     try:
         code = main()
     except KeyboardInterrupt:  # between main's own handlers (e.g. in its finally clause)
         code = _interrupted()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if _SIGINT_SEEN[0]:  # a Ctrl-C some library swallowed: its work is not trusted, the run says so
+        code = _interrupted()
+    if code == 130:
+        # Interrupted: leave now. CPython remembers a KeyboardInterrupt raised inside code it ran for a library
+        # (and then re-raises SIGINT at exit, status -2), and the atexit handlers have nothing left to finish:
+        # the staging folders were removed as the interrupt unwound.
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(130)
     sys.exit(code)
 
 

@@ -1,7 +1,7 @@
 """A dive as semslam consumes it: the vehicle description, navigation logs, scans and optional ground truth.
 
-:class:`Dataset` is the data contract between every producer (the simulator, a mission directory, a ROS bag,
-numpy arrays) and every consumer (:func:`semslam.pipeline.mission.detect_mission`, :class:`semslam.slam.SlamSession`,
+:class:`Dataset` is the data contract between every producer (the simulator, a dataset directory, a ROS bag,
+numpy arrays) and every consumer (:func:`semslam.pipeline.dataset_detection.detect_dataset`, :class:`semslam.slam.SlamSession`,
 :func:`semslam.run.run_slam`). Build one in Python from arrays::
 
     from semslam.dataset import Dataset, DvlLog, AttitudeLog, DepthLog, VehicleDescription

@@ -1,6 +1,6 @@
 """ROS 1 / ROS 2 bags as datasets: a topic map says which topic is which sensor, messages are converted to
 semslam's frames at this border (REP-103/105: ROS world ENU and body FLU -> world NED and body FRD), and a bag
-is streamed into a mission directory (scans written one by one: bounded memory on a dive of any length).
+is streamed into a dataset directory (scans written one by one: bounded memory on a dive of any length).
 
 Topic map (TOML; ``semslam bag info BAG`` prints a suggestion)::
 
@@ -316,7 +316,7 @@ def fixes_in_local_frame(rows, origin: dict | None):
 def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic_map: TopicMap | None = None,
                vehicle: VehicleDescription | None = None, msg_dirs=(), overwrite: bool = False,
                progress: Progress = False) -> Path:
-    """Convert a bag into a mission directory (format 2; scans as PCD with a per-point ``t`` field in seconds
+    """Convert a bag into a dataset directory (format 2; scans as PCD with a per-point ``t`` field in seconds
     from the scan's start). Scans are written as they come; the directory appears only when complete."""
     import shutil
 
@@ -324,7 +324,7 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
     from ..io.ros import open_bag
     from .dataset import Dataset
     from .logs import AttitudeLog, DepthLog, DvlLog
-    from .mission_dir import write_mission
+    from .directory import write_dataset
 
     vehicle = VehicleDescription.girona500() if vehicle is None else vehicle
     out = Path(out_dir)
@@ -371,7 +371,7 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
                      fixes=fixes, geodetic_origin=geo)
         if not len(ds.attitude):
             raise BagError(f"Bag {str(bag_path)!r}: the attitude topic {tmap.attitude!r} has no usable message.")
-        return write_mission(ds, out, overwrite=overwrite)
+        return write_dataset(ds, out, overwrite=overwrite)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 

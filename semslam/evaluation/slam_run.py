@@ -131,7 +131,7 @@ def evaluate_results(results: dict, reference: Dataset | None, symmetries: dict[
 
 def load_reference(source) -> Dataset | None:
     """The ground truth of a dive's source for evaluation after a run: a :class:`Dataset` with truth or object
-    poses, a mission directory with ``ground_truth/``; None for a bag or a dive without truth."""
+    poses, a dataset directory with ``ground_truth/``; None for a bag or a dive without truth."""
     import os
     from pathlib import Path
 
@@ -141,7 +141,7 @@ def load_reference(source) -> Dataset | None:
         path = Path(os.fspath(source))
         if not (path / "mission.json").is_file():
             return None
-        from ..dataset import read_mission
+        from ..dataset import read_dataset
 
-        ds = read_mission(path)
+        ds = read_dataset(path)
     return ds if ds.truth is not None or ds.objects else None

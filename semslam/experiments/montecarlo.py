@@ -1,7 +1,7 @@
 """Seeded Monte-Carlo evaluation: N missions, each run in several modes; ATE and ANEES with chi-square bands.
 
-Missions come from the simulator (``semslam.simulation.simulate_mission(config, seed=..., with_scans=False)``)
-when it is available, else from :func:`semslam.simulation.synthetic.square_mission`. Run ``i`` uses seed
+Missions come from the simulator (``semslam.simulation.simulate_dataset(config, seed=..., with_scans=False)``)
+when it is available, else from :func:`semslam.simulation.synthetic.square_dataset`. Run ``i`` uses seed
 ``seed + i`` for the mission and the truth-based detections, so every mode sees the same missions.
 """
 
@@ -26,16 +26,16 @@ from ..evaluation.metrics import anees, chi2_band, nees
 from ..modes import BACKENDS
 
 
-def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
+def make_dataset(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", loops: int = 3,
                  yaw_bias_walk_rad_per_sqrt_s: float = 0.0, white_dvl: bool = False):
     """One mission for Monte-Carlo run ``seed`` (simulator if available, else the synthetic square).
 
     ``white_dvl``: the simulator's DVL without its systematic errors (scale, misalignment, biases)."""
     if source not in ("auto", "simulator", "synthetic"):
-        raise SlamError(f"The 'source' argument of make_mission must be 'auto', 'simulator' or 'synthetic'. "
+        raise SlamError(f"The 'source' argument of make_dataset must be 'auto', 'simulator' or 'synthetic'. "
                         f"Got {source!r} instead.")
     if source in ("auto", "simulator"):
-        from ..simulation import simulate_mission
+        from ..simulation import simulate_dataset
         from ..simulation.config import DvlConfig, SimulatorConfig
 
         base = SimulatorConfig()
@@ -44,10 +44,10 @@ def make_mission(seed: int, *, yaw_bias_rad: float = 0.0, source: str = "auto", 
                            trajectory=replace(base.trajectory, loops=loops))
         if white_dvl:
             cfg = cfg.replace(dvl=DvlConfig.white())
-        return simulate_mission(cfg, seed=seed, with_scans=False)
-    from ..simulation.synthetic import square_mission
+        return simulate_dataset(cfg, seed=seed, with_scans=False)
+    from ..simulation.synthetic import square_dataset
 
-    return square_mission(seed=seed, yaw_bias_rad=yaw_bias_rad, loops=loops)
+    return square_dataset(seed=seed, yaw_bias_rad=yaw_bias_rad, loops=loops)
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,7 +111,7 @@ def _montecarlo_run(i: int, *, opts: dict) -> dict:
     """Run ``i`` of :func:`run_montecarlo` (one mission, every mode): per mode the per-epoch NEES (online, smoothed),
     3-sigma bound, error, relative stamps and the metrics. A Dask task: small arguments, small result."""
     seed = opts["seed"] + i
-    mission = make_mission(seed, yaw_bias_rad=opts["yaw_bias_rad"], source=opts["source"], loops=opts["loops"],
+    mission = make_dataset(seed, yaw_bias_rad=opts["yaw_bias_rad"], source=opts["source"], loops=opts["loops"],
                            yaw_bias_walk_rad_per_sqrt_s=opts["yaw_bias_walk_rad_per_sqrt_s"], white_dvl=opts["white_dvl"])
     cfg = SlamConfig().updated(**opts["config_overrides"])
     out = {}

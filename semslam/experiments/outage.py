@@ -20,7 +20,7 @@ from ..errors import SlamError
 from ..simulation.truth_slam import run_truth_slam
 from ..slam import MODES, SlamConfig
 from ..evaluation.metrics import anees, chi2_band, nees
-from .montecarlo import make_mission
+from .montecarlo import make_dataset
 
 #: scenario -> (start, end) of the outage as fractions of the DVL log's time span
 OUTAGE_SCENARIOS = {"none": (0.0, 0.0), "first_half": (0.0, 0.5), "middle": (1 / 3, 2 / 3),
@@ -88,10 +88,10 @@ def run_outage_montecarlo(n_runs: int, *, scenarios=("first_half", "middle", "la
         for scen in scenarios:
             per: dict = {key: [] for key in runs}
             for i in range(n_runs):
-                missions = {"plain": make_mission(seed + i, loops=loops)}
+                missions = {"plain": make_dataset(seed + i, loops=loops)}
                 if biased:
                     bias = float(np.random.default_rng(seed + i).normal(0.0, cfg.motion.yaw_bias_sigma_rad))
-                    missions["biased"] = make_mission(seed + i, loops=loops, yaw_bias_rad=bias)
+                    missions["biased"] = make_dataset(seed + i, loops=loops, yaw_bias_rad=bias)
                 missions = {k: with_dvl_outage(m, *OUTAGE_SCENARIOS[scen]) for k, m in missions.items()}
                 for mode, kind in runs:
                     r = run_truth_slam(missions[kind], mode=mode, config=cfg, seed=seed + i)

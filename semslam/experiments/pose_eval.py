@@ -60,13 +60,13 @@ def mission_clusters(mission, *, voxel_m: float = 0.005, min_points: int = 30) -
 def simulated_clusters(seeds=(0,), *, altitudes_m=(1.5,), loops: int = 1, voxel_m: float = 0.005,
                        min_points: int = 30) -> list[EvalCluster]:
     """Clusters of one-loop missions for every (seed, altitude) pair."""
-    from ..simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from ..simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
     out = []
     for alt in altitudes_m:
         for s in seeds:
             cfg = SimulatorConfig(trajectory=TrajectoryConfig(loops=loops, altitude_m=float(alt)))
-            out += mission_clusters(simulate_mission(cfg, seed=int(s)), voxel_m=voxel_m, min_points=min_points)
+            out += mission_clusters(simulate_dataset(cfg, seed=int(s)), voxel_m=voxel_m, min_points=min_points)
     return out
 
 

@@ -216,7 +216,7 @@ class ScanRecognizer:
             detection is then stamped with the median time of its cluster's points.
         up_scanner : (3,), optional
             The up direction in this scan's frame (a vehicle's attitude at the scan:
-            :func:`semslam.pipeline.mission.up_in_scanner`), instead of ``PipelineConfig.up_scanner``.
+            :func:`semslam.pipeline.dataset_detection.up_in_scanner`), instead of ``PipelineConfig.up_scanner``.
         """
         cfg = self.config
         ctx = scan_context(scan, default_up_scanner=cfg.up_scanner, seed=seed, stamp_s=stamp_s, scan_id=scan_id,

@@ -6,7 +6,7 @@ and a database of cleaned views matched against uncleaned queries mistakes one c
 71 % instead of 95 % right class on the real valves). :class:`ViewPreprocessing` says what was done to the
 views before their descriptors; :func:`~semslam.recognition.build_database` applies it to the views and stores
 it in ``params["preprocessing"]``; :meth:`~semslam.recognition.ViewDatabase.describe` (the one door of
-``Recognizer.match``, ``ScanRecognizer.recognize``, ``detect_mission``, ``run`` and the live node) applies it to
+``Recognizer.match``, ``ScanRecognizer.recognize``, ``detect_dataset``, ``run`` and the live node) applies it to
 every query. The voxel grid and the normal radius are recorded beside it (``params["voxel_leaf_m"]``,
 ``params["normal_radius_m"]``) and applied by :func:`~semslam.recognition.compute_view_descriptors`.
 

@@ -1,4 +1,4 @@
-"""semslam.run: sources -> runner -> sinks. One streaming path from any dive (a ROS bag, a mission directory, the
+"""semslam.run: sources -> runner -> sinks. One streaming path from any dive (a ROS bag, a dataset directory, the
 simulator in memory, live topics) to trajectories, a map and a health verdict.
 
 * :func:`open_dive` (``sources``): a dive as one time-ordered stream of typed messages (``messages``).

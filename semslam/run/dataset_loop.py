@@ -87,7 +87,7 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
     dataset : Dataset
         Vehicle description, navigation logs, position fixes (and ground truth for the metrics).
     detections_by_scan : dict, optional
-        ``{scan_id: [Detection]}`` in the scanner frame, each with ``stamp_s`` (from :func:`detect_mission`, a
+        ``{scan_id: [Detection]}`` in the scanner frame, each with ``stamp_s`` (from :func:`detect_dataset`, a
         detections file, or the simulator's truth-based source). None or empty: no object measurements.
     mode : {"dr", "position", "pose", "pose+heading"}
     config : SlamConfig, optional

@@ -33,7 +33,7 @@ RUN_JSON = "run.json"
 def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, vehicle=None, msg_dirs=(),
              config: SlamConfig | None = None, pipeline_config=None, backend: str = "ekf", seed: int = 0,
              survey=None, up_from_attitude: bool = False, keep_unreliable: bool = False, export: bool = True) -> dict:
-    """Recognise every scan of the dive ``source`` (bag, mission directory, Dataset) with the view database
+    """Recognise every scan of the dive ``source`` (bag, dataset directory, Dataset) with the view database
     ``db``, run SLAM in every mode of ``modes`` in one pass, and write the run directory ``out_dir`` (which the
     caller creates, e.g. with :func:`semslam._outdir.staged_output_dir`). Returns the payload the CLI prints: per
     mode the metrics and the health verdict, the detection summary, the start."""
@@ -49,7 +49,7 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
     outcome = run_stream(dive, modes=tuple(modes), recognizer=recognizer, config=cfg, symmetries=db.symmetries(),
                          backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
                          up_from_attitude=up_from_attitude)
-    # after the run: a mission directory's (or a dataset's) ground truth, when it has one, for the metrics only
+    # after the run: a dataset directory's (or a dataset's) ground truth, when it has one, for the metrics only
     from ..evaluation.slam_run import evaluate_results, load_reference
 
     outcome.results = evaluate_results(outcome.results, load_reference(source), db.symmetries())
@@ -58,7 +58,7 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
 
 def detect_dive(source: Any, *, db, topics=None, vehicle=None, msg_dirs=(), pipeline_config=None, seed: int = 0,
                 up_from_attitude: bool = False, keep_unreliable: bool = False, progress: Any = False) -> RunOutcome:
-    """Recognise every scan of the dive ``source`` (bag, mission directory, Dataset) with the view database ``db``:
+    """Recognise every scan of the dive ``source`` (bag, dataset directory, Dataset) with the view database ``db``:
     the detections :func:`run_dive` would keep for SLAM, through the same runner (only dead reckoning rides along,
     for the scans' timing), nothing written. ``semslam detect`` is this call and a file.
 

@@ -1,5 +1,5 @@
 """The typed messages of a dive as the runner consumes them, in semslam's units and frames (converted at the
-border by the source: a bag's ENU/FLU messages, a mission directory's CSV rows, the simulator's arrays, live
+border by the source: a bag's ENU/FLU messages, a dataset directory's CSV rows, the simulator's arrays, live
 topics). Every message carries its own stamp (s, one clock); a source yields them in stamp order.
 
 =============  ==========================================================================================

@@ -45,7 +45,7 @@ class RunOutcome:
     counts: dict = field(default_factory=dict)
 
     def detection_summary(self) -> dict:
-        from ..pipeline.mission import detection_summary
+        from ..pipeline.dataset_detection import detection_summary
 
         return detection_summary(self.scans, sum(len(v) for v in self.detections_by_scan.values()))
 
@@ -70,7 +70,7 @@ class Runner:
     seed : int
         Scan ``k`` is recognised with seed ``seed * 100003 + k``.
     keep_unreliable, up_from_attitude : bool
-        As :func:`semslam.pipeline.mission.detect_mission`.
+        As :func:`semslam.pipeline.dataset_detection.detect_dataset`.
     on_scan : callable, optional
         ``on_scan(scan_message, kept_detections, stats, result)`` after each recognised scan.
     """
@@ -154,7 +154,7 @@ class Runner:
             self.counts["scans_not_recognised"] += 1
             return
         else:
-            from ..pipeline.mission import detect_scan, up_from_attitude_samples
+            from ..pipeline.dataset_detection import detect_scan, up_from_attitude_samples
 
             up = None
             if self.up_from_attitude and self._att:

@@ -1,5 +1,5 @@
 """Sources of a dive: one time-ordered stream of typed messages (:mod:`semslam.run.messages`) from a ROS 1/2 bag
-(read lazily with rosbags: nothing is written to disk), a mission directory, or a :class:`~semslam.dataset.Dataset`
+(read lazily with rosbags: nothing is written to disk), a dataset directory, or a :class:`~semslam.dataset.Dataset`
 in memory (the simulator's). ``open_dive`` picks the source; every consumer (``semslam run``, the benchmarks, the
 ROS node's tests) reads a dive through it, so no figure comes from a privileged path.
 
@@ -58,7 +58,7 @@ class Dive:
 
 
 def open_dive(source: Any, *, topics: Any = None, vehicle: Any = None, msg_dirs=(), scans: bool = True) -> Dive:
-    """Open a dive: a :class:`~semslam.dataset.Dataset`, a mission directory, or a ROS 1 (``.bag``) / ROS 2 bag.
+    """Open a dive: a :class:`~semslam.dataset.Dataset`, a dataset directory, or a ROS 1 (``.bag``) / ROS 2 bag.
 
     Parameters
     ----------
@@ -79,13 +79,13 @@ def open_dive(source: Any, *, topics: Any = None, vehicle: Any = None, msg_dirs=
                              scans=scans)
     path = Path(os.fspath(source))
     if (path / "mission.json").is_file():
-        from ..dataset import read_mission
+        from ..dataset import read_dataset
 
-        ds = read_mission(path)
+        ds = read_dataset(path)
         return _dataset_dive(ds if veh is None else replace(ds, vehicle=veh), name=str(path), kind="mission",
                              scans=scans)
     if not path.exists():
-        raise InputError(f"The dive {str(path)!r} does not exist: expected a ROS bag or a mission directory.")
+        raise InputError(f"The dive {str(path)!r} does not exist: expected a ROS bag or a dataset directory.")
     return _bag_dive(path, topics, veh, msg_dirs, scans)
 
 

@@ -15,14 +15,13 @@ from .config import (
 from .kinect import acquire_views, builtin_view_clouds, kinect_view
 from .objects import BUILTIN_LABELS, ObjectModel, builtin_objects, load_object, make_object
 from .scanner import LaserScanner, ScanResult
-from .simulate import MISSION_FORMAT_VERSION, simulate_mission
+from .simulate import simulate_dataset
 from .trajectory import Trajectory, TrajectorySample
 from .world import World, build_world, floor_depth_m
 
 __all__ = [
                      "BUILTIN_LABELS",
                      "CATALOGUE_LABELS",
-                     "MISSION_FORMAT_VERSION",
                      "AhrsConfig",
                      "DepthConfig",
                      "DvlConfig",
@@ -46,5 +45,5 @@ __all__ = [
                      "kinect_view",
                      "load_object",
                      "make_object",
-                     "simulate_mission",
+                     "simulate_dataset",
 ]

@@ -356,7 +356,7 @@ class FixConfig(_Dict):
 
 @dataclass(frozen=True)
 class SimulatorConfig(_Dict):
-    """Everything :func:`semslam.simulation.simulate_mission` needs (the seed is separate)."""
+    """Everything :func:`semslam.simulation.simulate_dataset` needs (the seed is separate)."""
 
     world: WorldConfig = field(default_factory=WorldConfig)
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)

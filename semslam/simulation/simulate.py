@@ -19,15 +19,13 @@ from ..errors import SimulationError
 from ..geometry import RigidTransform
 from ._ray_kernels import RayCaster
 from .config import SimulatorConfig
-from ..dataset import FORMAT_VERSION, Dataset, ScanRecord, VehicleTruth, vehicle_from_simulator_dict
+from ..dataset import Dataset, ScanRecord, VehicleTruth, vehicle_from_simulator_dict
 from .objects import ObjectModel, builtin_objects
 from .scanner import LaserScanner
 from .sensors import sensor_stamps, simulate_ahrs, simulate_depth, simulate_dvl, simulate_fixes
 from .trajectory import Trajectory
 from .world import World, build_world
 
-#: Version of the mission format written by :func:`semslam.dataset.write_mission`.
-MISSION_FORMAT_VERSION = FORMAT_VERSION
 #: Time between scan starts (s); a scan lasts 1 / scan_rate_hz.
 DEFAULT_SCAN_INTERVAL_S = 0.5
 
@@ -41,7 +39,7 @@ def _streams(seed: int) -> dict[str, np.random.Generator]:
 
 def _check_seed(seed) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise SimulationError(f"The 'seed' argument of simulate_mission must be a non-negative integer. Got {seed!r} instead.")
+        raise SimulationError(f"The 'seed' argument of simulate_dataset must be a non-negative integer. Got {seed!r} instead.")
     return int(seed)
 
 
@@ -53,7 +51,7 @@ def mission_trajectory(world: World, config: SimulatorConfig, rng: np.random.Gen
     return Trajectory(corners, config.world.tank_depth_m, config.trajectory, seed=rng)
 
 
-def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
+def simulate_dataset(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
                      scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False,
                      objects: dict | None = None, world_seed: int | None = None) -> Dataset:
     """Simulate a whole mission.
@@ -83,16 +81,16 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     """
     config = SimulatorConfig() if config is None else config
     if not isinstance(config, SimulatorConfig):
-        raise SimulationError(f"The 'config' argument of simulate_mission must be a SimulatorConfig or None. Got {type(config).__name__} instead.")
+        raise SimulationError(f"The 'config' argument of simulate_dataset must be a SimulatorConfig or None. Got {type(config).__name__} instead.")
     seed = _check_seed(seed)
-    scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_mission")
+    scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_dataset")
     rngs = _streams(seed)
     if world_seed is not None:
         rngs["world"] = _streams(_check_seed(world_seed))["world"]
     if objects is None:
         objects = builtin_objects()
     elif not isinstance(objects, dict) or not objects or not all(isinstance(m, ObjectModel) for m in objects.values()):
-        raise SimulationError("The 'objects' argument of simulate_mission must be a non-empty dict of ObjectModel. "
+        raise SimulationError("The 'objects' argument of simulate_dataset must be a non-empty dict of ObjectModel. "
                               f"Got {type(objects).__name__} {objects!r:.80} instead.")
     world = build_world(config.world, objects, seed=rngs["world"])
     traj = mission_trajectory(world, config, rngs["trajectory"])
@@ -134,7 +132,7 @@ def simulate_mission(config: SimulatorConfig | None = None, *, seed: int = 0, wi
 def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,
                     interval_s: float, rng: np.random.Generator, progress: bool):
     if interval_s < scanner.duration_s - 1e-12:
-        raise SimulationError(f"The 'scan_interval_s' argument of simulate_mission must be >= the scan duration "
+        raise SimulationError(f"The 'scan_interval_s' argument of simulate_dataset must be >= the scan duration "
                               f"{scanner.duration_s:.3f} s (1 / scan_rate_hz). Got {interval_s} instead.")
     caster = RayCaster(world.scene)
     T_vs = scanner.T_vehicle_scanner.matrix

@@ -20,14 +20,14 @@ from ..dataset import AttitudeLog, Dataset, DepthLog, DvlLog, ObjectTruth, Vehic
 LABELS = ("reducing_socket", "elbow", "reducing_tee", "ball_valve")
 
 
-def square_mission(*, seed=0, loops: int = 3, side_m: float = 4.0, speed_mps: float = 0.3, depth_m: float = 3.5,
+def square_dataset(*, seed=0, loops: int = 3, side_m: float = 4.0, speed_mps: float = 0.3, depth_m: float = 3.5,
                    corner_radius_m: float = 0.5, truth_rate_hz: float = 20.0, dvl_rate_hz: float = 5.0,
                    depth_rate_hz: float = 10.0, dvl_sigma_mps: float = 0.005, ahrs_sigma_rpy_rad=(0.0035, 0.0035, 0.0175),
                    depth_sigma_m: float = 0.02, yaw_bias_rad: float = 0.0, dvl_dropout_prob: float = 0.0,
                    dvl_outlier_prob: float = 0.0, dvl_outlier_std_mps: float = 0.2, object_depth_m: float = 5.0,
                    extra_objects: int = 0) -> Dataset:
     """The mission described in the module docstring. Stamps start at 0 s."""
-    rng = as_rng(seed, caller="square_mission")
+    rng = as_rng(seed, caller="square_dataset")
     straight = side_m - 2 * corner_radius_m
     arc = 0.5 * math.pi * corner_radius_m
     loop_len = 4 * (straight + arc)

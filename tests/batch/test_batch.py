@@ -27,15 +27,15 @@ OPTIONS = {"modes": ["dr", "pose"], "seed": 3, "no_report": True}
 def dives(tmp_path_factory):
     """Two simulated missions, a corrupt one, and a small database."""
     from semslam.recognition import save_database
-    from semslam.simulation import SimulatorConfig, simulate_mission
-    from semslam.dataset import write_mission
+    from semslam.simulation import SimulatorConfig, simulate_dataset
+    from semslam.dataset import write_dataset
     from semslam.simulation.cad_models import build_models_database
 
     root = tmp_path_factory.mktemp("dives")
     out = []
     for seed in (1, 2):
-        m = simulate_mission(SimulatorConfig.quick(), seed=seed, scan_interval_s=3.0)
-        out.append(write_mission(m, root / f"dive{seed}"))
+        m = simulate_dataset(SimulatorConfig.quick(), seed=seed, scan_interval_s=3.0)
+        out.append(write_dataset(m, root / f"dive{seed}"))
     bad = root / "corrupt"
     bad.mkdir()
     (bad / "mission.json").write_text("{ not json", encoding="utf-8")
@@ -173,10 +173,10 @@ def test_bag_dive_without_ground_truth(dives, tmp_path):
     """A ROS 1 bag as a vehicle records it: streamed (nothing converted on disk), no ATE in the summary."""
     from semslam.dataset import write_vehicle_toml
     from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
-    from semslam.simulation import SimulatorConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, simulate_dataset
 
     _, db = dives
-    m = simulate_mission(SimulatorConfig.quick(), seed=5, scan_interval_s=3.0)
+    m = simulate_dataset(SimulatorConfig.quick(), seed=5, scan_interval_s=3.0)
     bag = write_bag(m, tmp_path / "dive5.bag", "ros1")
     write_vehicle_toml(m.vehicle, tmp_path / "vehicle.toml")
     (tmp_path / "topics.toml").write_text(SEMSLAM_TOPICS.to_toml())

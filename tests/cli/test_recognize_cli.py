@@ -12,9 +12,9 @@ from semslam.cli.main import main
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     from semslam.io import write_point_cloud
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    m = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    m = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
     path = tmp_path_factory.mktemp("scene") / "scan.pcd"
     write_point_cloud(path, m.load_scan(17))  # the ball valve, whole, and the tank's slope
     return path

@@ -13,8 +13,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from semslam.dataset import (AttitudeLog, Dataset, DepthLog, DvlLog, VehicleDescription, read_mission,
-                             read_vehicle_toml, write_mission)
+from semslam.dataset import (AttitudeLog, Dataset, DepthLog, DvlLog, VehicleDescription, read_dataset,
+                             read_vehicle_toml, write_dataset)
 from semslam.dataset.rosbag import BagDecoder, TopicMap
 from semslam.dataset.vehicle import _SECTIONS as VEHICLE_SECTIONS
 from semslam.errors import BagError, ConfigError, DatasetError, SlamError
@@ -247,11 +247,11 @@ def test_an_ahrs_csv_row_at_2_pow_31_s_is_an_error_not_a_hang(tmp_path):
     dvl = DvlLog(ta, np.tile([0.2, 0.0, 0.0], (len(ta), 1)), np.ones(len(ta), bool))
     ds = Dataset(VehicleDescription.girona500(), dvl,
                  AttitudeLog(ta, np.zeros((len(ta), 3))), DepthLog(ta, np.full(len(ta), 3.0)))
-    d = write_mission(ds, tmp_path / "m")
+    d = write_dataset(ds, tmp_path / "m")
     lines = (d / "ahrs.csv").read_text().splitlines()
     lines[-1] = "2147483648.0," + lines[-1].split(",", 1)[1]
     (d / "ahrs.csv").write_text("\n".join(lines) + "\n")
-    mission = read_mission(d)
+    mission = read_dataset(d)
 
     def hang(signum, frame):
         raise TimeoutError("run_slam still predicting towards the 2^31 s stamp after 20 s")

@@ -1,5 +1,5 @@
 """ROS bags as datasets: a simulated mission written as ROS 1, ROS 2 mcap and ROS 2 sqlite3 bags reads back to
-the same logs and scans, gives the same detections and the same trajectories as the mission directory; topic
+the same logs and scans, gives the same detections and the same trajectories as the dataset directory; topic
 maps and the CLI (`semslam bag info/export`, `semslam simulate --format`, `semslam run`)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from semslam.cli.main import main
-from semslam.dataset import read_mission, write_mission
+from semslam.dataset import read_dataset, write_dataset
 from semslam.dataset.rosbag import TopicMap, export_bag, read_topic_map
 from semslam.dataset.rosbag_write import FORMATS, SEMSLAM_TOPICS, write_bag
 from semslam.errors import BagError, DatasetError
@@ -20,11 +20,11 @@ from semslam.errors import BagError, DatasetError
 
 @pytest.fixture(scope="module")
 def mission(tmp_path_factory):
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    m = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
-    d = write_mission(m, tmp_path_factory.mktemp("m") / "mission")
-    return replace(read_mission(d), truth=None)  # a recorded dive has no ground truth
+    m = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    d = write_dataset(m, tmp_path_factory.mktemp("m") / "mission")
+    return replace(read_dataset(d), truth=None)  # a recorded dive has no ground truth
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,7 @@ def test_every_bag_format_round_trips_the_logs_and_scans(mission, tmp_path):
     no_mount = mission.vehicle.replace(scanner=replace(mission.vehicle.scanner, T_vehicle_scanner=RigidTransform.identity()))
     for fmt in FORMATS:
         bag = write_bag(mission, _bag_name(tmp_path, fmt), fmt)
-        back = read_mission(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=no_mount))
+        back = read_dataset(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=no_mount))
         np.testing.assert_allclose(back.vehicle.scanner.T_vehicle_scanner.matrix, mission.vehicle.scanner.T_vehicle_scanner.matrix, atol=1e-12)
         assert back.metadata["source"]["T_vehicle_scanner_from"] == "/tf_static"
         np.testing.assert_allclose(back.attitude.stamp_s, mission.attitude.stamp_s, rtol=0, atol=1e-9)
@@ -70,19 +70,19 @@ def test_every_bag_format_round_trips_the_logs_and_scans(mission, tmp_path):
 
 def test_bags_give_the_mission_directory_detections_and_trajectories(mission, recognizer, tmp_path):
     """The issue's round trip: ROS 1, ROS 2 mcap and ROS 2 sqlite3 give the same detections and the same
-    trajectories (to 1e-9) as the mission directory."""
-    from semslam.pipeline.mission import detect_mission
+    trajectories (to 1e-9) as the dataset directory."""
+    from semslam.pipeline.dataset_detection import detect_dataset
     from semslam.simulation.truth_slam import builtin_symmetries
     from semslam.run import run_slam
 
     sym = builtin_symmetries()
-    ref_dets = detect_mission(mission, recognizer, seed=0).detections_by_scan
+    ref_dets = detect_dataset(mission, recognizer, seed=0).detections_by_scan
     assert sum(len(v) for v in ref_dets.values()) >= 5
     ref = run_slam(mission, ref_dets, mode="pose", symmetries=sym)
     for fmt in FORMATS:
         bag = write_bag(mission, _bag_name(tmp_path, fmt), fmt)
-        ds = read_mission(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=mission.vehicle))
-        dets = detect_mission(ds, recognizer, seed=0).detections_by_scan
+        ds = read_dataset(export_bag(bag, tmp_path / f"m_{fmt}", topic_map=SEMSLAM_TOPICS, vehicle=mission.vehicle))
+        dets = detect_dataset(ds, recognizer, seed=0).detections_by_scan
         assert sorted(dets) == sorted(ref_dets), fmt
         for sid in ref_dets:
             assert [d.label for d in dets[sid]] == [d.label for d in ref_dets[sid]]
@@ -144,14 +144,14 @@ def test_cli_simulate_bag_info_export_and_run(tmp_path, capsys):
 def test_report_of_a_dive_without_ground_truth(tmp_path):
     """A recorded dive has no truth: the report leaves the truth-based sections out and still shows the
     trajectories, the 3-sigma bounds over time and the landmark maps."""
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
     from semslam.report.build import build_report
     from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
     from semslam.run import run_slam
     from semslam.run.rundir import write_run
     from semslam.run.rundir import mode_dir
 
-    m = square_mission(seed=1, loops=1)
+    m = square_dataset(seed=1, loops=1)
     dets = simulate_detections(m, TruthDetectionConfig(), seed=1)
     dive = replace(m, truth=None, objects=[])
     for mode in ("dr", "pose"):

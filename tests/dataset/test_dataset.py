@@ -1,4 +1,4 @@
-"""The data contract (semslam.dataset), the streaming SLAM session and detect_mission, without and with the
+"""The data contract (semslam.dataset), the streaming SLAM session and detect_dataset, without and with the
 simulator: a dataset built from plain numpy arrays runs through both; a simulated mission gives the same run
 in memory, from its directory, and streamed in another interleaving."""
 
@@ -21,9 +21,9 @@ from semslam.dataset import (
     ScanRecord,
     VehicleDescription,
     VehicleTruth,
-    read_mission,
+    read_dataset,
     read_vehicle_toml,
-    write_mission,
+    write_dataset,
     write_vehicle_toml,
 )
 from semslam.errors import DatasetError, SemslamError, SlamError
@@ -80,13 +80,13 @@ def _stream(session: SlamSession, ds: Dataset, dets: dict, attitude_lead_s: floa
 
 @pytest.fixture(scope="module")
 def sim_mission():
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    return simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=3, with_scans=False)
+    return simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=3, with_scans=False)
 
 
 def test_simulated_mission_same_run_in_memory_from_disk_and_streamed(sim_mission, tmp_path):
-    """The mission directory round-trips the run to 1e-9; streaming the messages with the attitude half a
+    """The dataset directory round-trips the run to 1e-9; streaming the messages with the attitude half a
     second ahead of the other sensors gives the very same run (the session waits for the attitude)."""
     from semslam.simulation.detections import simulate_detections
     from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config
@@ -95,7 +95,7 @@ def test_simulated_mission_same_run_in_memory_from_disk_and_streamed(sim_mission
     dets = simulate_detections(sim_mission, truth_detection_config(sim_mission), seed=1, symmetries=sym)
     cfg = SlamConfig()
     a = run_slam(sim_mission, dets, mode="pose", config=cfg, symmetries=sym)
-    back = read_mission(write_mission(sim_mission, tmp_path / "m"))
+    back = read_dataset(write_dataset(sim_mission, tmp_path / "m"))
     assert back.dvl.beam_range_m is not None and back.vehicle.to_dict() == sim_mission.vehicle.to_dict()
     b = run_slam(back, dets, mode="pose", config=cfg, symmetries=sym)
     np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-9)
@@ -211,25 +211,25 @@ def test_vehicle_file_round_trip_and_errors(tmp_path):
 def test_mission_directory_of_format_1_is_refused_with_a_one_line_error(sim_mission, tmp_path):
     """Format 1 (semslam <= 0.1) is no longer read: a clear error naming the file and what to do, never a guess
     of the vehicle from old simulator settings; a format-2 directory without its vehicle file names the file."""
-    d = write_mission(sim_mission, tmp_path / "v1")
+    d = write_dataset(sim_mission, tmp_path / "v1")
     meta = json.loads((d / "mission.json").read_text())
     meta["format_version"] = 1
     (d / "mission.json").write_text(json.dumps(meta))
     with pytest.raises(DatasetError, match=r"mission.json.*format_version 1.*no longer reads"):
-        read_mission(d)
+        read_dataset(d)
     meta["format_version"] = 2
     (d / "mission.json").write_text(json.dumps(meta))
     (d / "vehicle.toml").unlink()
     with pytest.raises(DatasetError, match="vehicle.toml"):
-        read_mission(d)
+        read_dataset(d)
 
 
 def test_detect_mission_on_a_numpy_dataset_feeds_the_session():
-    """Scans held in memory (a synthetic box on a floor, no simulator) through detect_mission: the same
+    """Scans held in memory (a synthetic box on a floor, no simulator) through detect_dataset: the same
     detections as the recogniser scan by scan, stamped inside each scan, and accepted by the session."""
     from semslam.simulation.synthetic_views import partial_view, ring_viewpoints, synthetic_shape_views
     from semslam.pipeline import PipelineConfig, ScanRecognizer
-    from semslam.pipeline.mission import detect_mission, scan_seed
+    from semslam.pipeline.dataset_detection import detect_dataset, scan_seed
     from semslam.recognition import build_database
 
     views, classes = synthetic_shape_views(6, n_points=500, seed=2)
@@ -248,8 +248,8 @@ def test_detect_mission_on_a_numpy_dataset_feeds_the_session():
         records.append(ScanRecord(k, 1.0 + k, 1.3 + k, f"scans/{k}.pcd", len(pts)))
     vehicle = ds0.vehicle.replace(scanner=replace(ds0.vehicle.scanner, line_count=10))
     ds = replace(ds0, vehicle=vehicle, scans=records, scan_clouds=clouds)
-    found = detect_mission(ds, rec, seed=4, keep_unreliable=True)  # no pose estimated: every pose unreliable
-    assert not detect_mission(ds, rec, seed=4).detections_by_scan
+    found = detect_dataset(ds, rec, seed=4, keep_unreliable=True)  # no pose estimated: every pose unreliable
+    assert not detect_dataset(ds, rec, seed=4).detections_by_scan
     assert len(found.scans) == 3 and found.summary()["n_scans"] == 3
     for r in records:
         direct = rec.recognize(clouds[r.scan_id], seed=scan_seed(4, r.scan_id), stamp_s=r.end_stamp_s,
@@ -288,16 +288,16 @@ def test_girona500_defaults_are_the_simulated_sensors_figures():
 
 
 def test_mission_log_errors_name_the_file(sim_mission, tmp_path):
-    d = write_mission(sim_mission, tmp_path / "m")
+    d = write_dataset(sim_mission, tmp_path / "m")
     rows = (d / "ahrs.csv").read_text().splitlines()
     rows[3], rows[4] = rows[4], rows[3]  # two stamps out of order
     (d / "ahrs.csv").write_text("\n".join(rows) + "\n")
     with pytest.raises(DatasetError, match=r"ahrs.csv.*must be sorted.*row 3"):
-        read_mission(d)
+        read_dataset(d)
     rows[3] = "nan" + rows[3][rows[3].index(","):]
     (d / "ahrs.csv").write_text("\n".join(rows) + "\n")
     with pytest.raises(DatasetError, match=r"ahrs.csv.*finite stamps"):
-        read_mission(d)
+        read_dataset(d)
 
 
 def test_far_future_and_early_messages_are_skipped_and_counted():

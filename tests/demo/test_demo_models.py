@@ -47,7 +47,7 @@ def test_a_missing_models_folder_is_one_line(tmp_path, capsys):
 
 
 def test_simulate_mission_rejects_bad_objects():
-    from semslam.simulation import simulate_mission
+    from semslam.simulation import simulate_dataset
 
-    with pytest.raises(SimulationError, match="'objects' argument of simulate_mission must be a non-empty dict"):
-        simulate_mission(objects={}, with_scans=False)
+    with pytest.raises(SimulationError, match="'objects' argument of simulate_dataset must be a non-empty dict"):
+        simulate_dataset(objects={}, with_scans=False)

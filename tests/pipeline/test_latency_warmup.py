@@ -15,9 +15,9 @@ def db(builtin_db_fresh):
 
 
 def test_warm_up_changes_no_result(db):
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
     warm = ScanRecognizer(db, PipelineConfig())
     warm.warm_up()
     assert set(warm._pose_models) == set(db.classes)  # every class prepared

@@ -24,9 +24,9 @@ def db(builtin_db_fresh):
 
 @pytest.fixture(scope="module")
 def mission():
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    return simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    return simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
 
 
 def test_finds_the_objects_in_view_with_the_right_labels(db, mission):

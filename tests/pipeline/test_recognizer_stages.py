@@ -22,9 +22,9 @@ def db(builtin_db_fresh):
 @pytest.fixture(scope="module")
 def scans():
     """Four laser scans of a simulated dive, one fitting in each (elbow, tee, ball valve, socket)."""
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
-    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4,
+    mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4,
                                scan_interval_s=5.0)
     return [(r.scan_id, mission.load_scan(r.scan_id)) for r in mission.scans]
 

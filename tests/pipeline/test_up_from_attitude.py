@@ -1,4 +1,4 @@
-"""Per-scan up direction from the vehicle's attitude (``detect_mission(up_from_attitude=True)``,
+"""Per-scan up direction from the vehicle's attitude (``detect_dataset(up_from_attitude=True)``,
 ``ScanRecognizer.recognize(up_scanner=...)``): a vehicle rolls and pitches, so one ``PipelineConfig.up_scanner``
 cannot keep objects upright on a real dive."""
 
@@ -19,8 +19,8 @@ from semslam.errors import InputError
 from semslam.geometry import RigidTransform
 from semslam.io import read_point_cloud
 from semslam.pipeline import PipelineConfig, ScanRecognizer
-from semslam.pipeline.mission import detect_mission
-from semslam.pipeline.mission import MAX_ATTITUDE_GAP_S, up_in_scanner
+from semslam.pipeline.dataset_detection import detect_dataset
+from semslam.pipeline.dataset_detection import MAX_ATTITUDE_GAP_S, up_in_scanner
 from semslam.recognition import load_database
 
 SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
@@ -61,12 +61,12 @@ def test_detect_mission_gives_each_scan_its_own_up(monkeypatch):
     seen = []
     rec = ScanRecognizer.__new__(ScanRecognizer)
     rec.recognize = lambda c, **kw: seen.append(kw["up_scanner"]) or _EMPTY
-    detect_mission(ds, rec, up_from_attitude=True)
+    detect_dataset(ds, rec, up_from_attitude=True)
     for k, up in enumerate(seen):
         np.testing.assert_allclose(up, up_in_scanner(ds, 2.0 * k + 0.2), atol=1e-12)
     assert len({tuple(np.round(u, 6)) for u in seen}) == 3  # they differ: the vehicle rocks
     seen.clear()
-    detect_mission(ds, rec)
+    detect_dataset(ds, rec)
     assert seen == [None, None, None]
 
 

@@ -202,9 +202,9 @@ def test_fixed_fuzz_subset_has_no_traceback_no_hang_and_no_lost_file(fuzz_cases)
 @pytest.fixture(scope="module")
 def scan_ds():
     """The quick dive with a scan every 4 s."""
-    from semslam.simulation import SimulatorConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, simulate_dataset
 
-    return simulate_mission(SimulatorConfig.quick(), seed=0, with_scans=True, scan_interval_s=4.0)
+    return simulate_dataset(SimulatorConfig.quick(), seed=0, with_scans=True, scan_interval_s=4.0)
 
 
 @pytest.mark.parametrize("game, reason", [("nan_point_times", "invalid"), ("old_scan", "stamp_before_start")])

@@ -1,4 +1,4 @@
-"""Derandomised fuzzing of every text input of a dive (issue 18, item 2): mission directories (mission.json and
+"""Derandomised fuzzing of every text input of a dive (issue 18, item 2): dataset directories (mission.json and
 the CSV logs), vehicle and topic-map TOML, SLAM config files and detections files. Each case is a seeded
 mutation (bytes flipped, the file cut, lines duplicated or swapped, a number made huge or NaN, a value retyped);
 only a :class:`~semslam.errors.SemslamError` may escape, each case ends within seconds and its peak allocation
@@ -14,7 +14,7 @@ import zlib
 import numpy as np
 import pytest
 
-from semslam.dataset import read_mission, read_vehicle_toml, write_mission
+from semslam.dataset import read_dataset, read_vehicle_toml, write_dataset
 from semslam.dataset.rosbag import read_topic_map
 from semslam.errors import SemslamError
 
@@ -81,9 +81,9 @@ def _only_semslam_errors(call, path, original: bytes, seed: int) -> int:
 
 @pytest.fixture(scope="module")
 def mission_dir(tmp_path_factory):
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
 
-    return write_mission(square_mission(seed=1, loops=1), tmp_path_factory.mktemp("fz") / "m")
+    return write_dataset(square_dataset(seed=1, loops=1), tmp_path_factory.mktemp("fz") / "m")
 
 
 @pytest.mark.parametrize("name", ["mission.json", "vehicle.toml", "dvl.csv", "ahrs.csv", "depth.csv",
@@ -92,7 +92,7 @@ def test_mission_directory_files(mission_dir, tmp_path, name):
     d = tmp_path / "m"
     shutil.copytree(mission_dir, d)
     original = (d / name).read_bytes()
-    n = _only_semslam_errors(lambda: read_mission(d), d / name, original, seed=zlib.crc32(name.encode()))
+    n = _only_semslam_errors(lambda: read_dataset(d), d / name, original, seed=zlib.crc32(name.encode()))
     assert n > 0  # the mutations do reach the checks
 
 
@@ -110,7 +110,7 @@ def test_slam_config_and_detections_files(tmp_path):
     import json
 
     from semslam.cli._inputs import read_config_file
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
     from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
     from semslam.slam import SlamConfig
     from semslam.io.detections import read_detections_jsonl, write_detections_jsonl
@@ -123,7 +123,7 @@ def test_slam_config_and_detections_files(tmp_path):
         SlamConfig.from_dict(raw.get("slam", raw), source=str(c))
 
     assert _only_semslam_errors(load_config, c, c.read_bytes(), seed=5) > 0
-    dets = simulate_detections(square_mission(seed=1, loops=1), TruthDetectionConfig(), seed=1)
+    dets = simulate_detections(square_dataset(seed=1, loops=1), TruthDetectionConfig(), seed=1)
     f = tmp_path / "d.jsonl"
     write_detections_jsonl(f, {k: v[:1] for k, v in list(dets.items())[:6]})
     assert _only_semslam_errors(lambda: read_detections_jsonl(f), f, f.read_bytes(), seed=6) > 0

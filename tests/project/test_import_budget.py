@@ -102,8 +102,8 @@ def test_without_a_command_module_every_command_is_registered(argv):
 
 def test_recognising_one_scan_does_not_load_the_dataset_layer():
     """semslam.pipeline serves the scan-level names only; the mission-level ones are imported from
-    semslam.pipeline.mission, so `semslam recognize` never loads semslam.dataset."""
-    code = ("import sys, semslam.pipeline as p; assert not hasattr(p, 'detect_mission'); "
+    semslam.pipeline.dataset_detection, so `semslam recognize` never loads semslam.dataset."""
+    code = ("import sys, semslam.pipeline as p; assert not hasattr(p, 'detect_dataset'); "
             "print('semslam.dataset' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

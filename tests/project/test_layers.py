@@ -110,7 +110,7 @@ def test_the_layer_test_fails_on_an_upward_import(tmp_path):
     copy = tmp_path / "semslam"
     shutil.copytree(PKG, copy, ignore=shutil.ignore_patterns("__pycache__"))
     target = copy / "slam" / "config.py"
-    target.write_text(target.read_text(encoding="utf-8") + "\nfrom ..simulation import simulate_mission  # planted\n",
+    target.write_text(target.read_text(encoding="utf-8") + "\nfrom ..simulation import simulate_dataset  # planted\n",
                       encoding="utf-8")
     bad = layer_violations(copy)
     assert len(bad) == 1 and "slam/config.py" in bad[0] and "'simulation'" in bad[0]

@@ -172,7 +172,7 @@ def test_folder_database_of_real_views_cleans_raw_queries(shared_dir, tmp_path):
 
 
 def test_scan_recognizer_applies_the_record_to_its_clusters(shapes):
-    """``ScanRecognizer.recognize`` (so ``detect_mission``, ``run`` and the node) describes clusters through the same
+    """``ScanRecognizer.recognize`` (so ``detect_dataset``, ``run`` and the node) describes clusters through the same
     door: a database recorded with a 1.5 m range limit recognises the object at 0.45 m and rejects the same object
     at 2.45 m with the reason, instead of matching it as the views were never treated."""
     from semslam.pipeline import ScanRecognizer

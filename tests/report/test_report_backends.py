@@ -112,13 +112,13 @@ def test_montecarlo_outputs_of_two_backends_make_one_report(tmp_path):
 
 def test_a_graph_run_report_shows_current_time_and_end_of_dive_errors(tmp_path):
     pytest.importorskip("gtsam", reason="the graph backends need GTSAM")
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
     from semslam.simulation.detections import simulate_detections
     from semslam.simulation.truth_slam import truth_detection_config
     from semslam.run import run_slam
     from semslam.run.rundir import write_run
 
-    m = square_mission(seed=3, loops=1)
+    m = square_dataset(seed=3, loops=1)
     dets = simulate_detections(m, truth_detection_config(m), seed=3, symmetries={})
     write_run(run_slam(m, dets, mode="pose", backend="isam2", symmetries={}), tmp_path)
     html = build_report(tmp_path).read_text()

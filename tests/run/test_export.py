@@ -41,11 +41,11 @@ from semslam.slam import SlamConfig, SlamResult
 @pytest.fixture(scope="module")
 def run():
     """A one-loop square mission, pose SLAM with truth-based detections (seeded): 101 epochs, 4 landmarks."""
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
     from semslam.simulation.detections import simulate_detections
     from semslam.simulation.truth_slam import builtin_symmetries, run_truth_slam, truth_detection_config
 
-    mission = square_mission(seed=1, loops=1)
+    mission = square_dataset(seed=1, loops=1)
     result = run_truth_slam(mission, mode="pose", seed=1)
     dets = simulate_detections(mission, truth_detection_config(mission), seed=1, symmetries=builtin_symmetries())
     assert result.attitude_rpy_rad is not None and result.smoothed_position_ned_m is not None

@@ -1,6 +1,6 @@
 """The ROS 1 node on a real roscore, no mocks: a simulated dive played with `rosbag play`, the node's outputs
 recorded with `rosbag record` and read back with semslam's bag reader, compared with the offline chain
-(detect_mission + run_slam) on the same bag. Everything started is stopped by PID; ROS logs stay in tmp_path."""
+(detect_dataset + run_slam) on the same bag. Everything started is stopped by PID; ROS logs stay in tmp_path."""
 
 from __future__ import annotations
 
@@ -49,17 +49,17 @@ def dive(tmp_path_factory):
     """A 24 s simulated dive with objects (40k-point scans) as a ROS 1 bag, its topic map, vehicle file and the
     built-in database file."""
     require_ros()
-    from semslam.dataset import write_mission, read_mission, write_vehicle_toml
+    from semslam.dataset import write_dataset, read_dataset, write_vehicle_toml
     from semslam.dataset.rosbag_write import SEMSLAM_TOPICS, write_bag
     from semslam.recognition.storage import save_database
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
     from semslam.simulation.builtin_db import builtin_database
     from semslam.simulation.config import ScannerConfig
 
     d = tmp_path_factory.mktemp("dive")
     cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1), scanner=ScannerConfig(n_lines=200,
                                                                                                   points_per_line=200))
-    mission = read_mission(write_mission(simulate_mission(cfg, seed=4), d / "mission"))
+    mission = read_dataset(write_dataset(simulate_dataset(cfg, seed=4), d / "mission"))
     bag = write_bag(mission, d / "dive.bag", "ros1")
     (d / "topics.toml").write_text(SEMSLAM_TOPICS.to_toml(), encoding="utf-8")
     write_vehicle_toml(mission.vehicle, d / "vehicle.toml")

@@ -1,6 +1,6 @@
 """``semslam run`` on a recorded dive, as a user runs it: the simulator's dive written as a ROS 1 bag with only the
 files the recorder leaves beside it (no ground truth), streamed through the one runner; frames never guessed; the
-health verdict; the same dive as a mission directory, with and without its ground truth."""
+health verdict; the same dive as a dataset directory, with and without its ground truth."""
 
 from __future__ import annotations
 
@@ -45,12 +45,12 @@ def test_bag_run_uses_the_recorders_files_and_starts_at_depth_from_the_gps_fix(d
     m = p["slam"]["pose"]
     assert m["depth_rejected"] == 0 and m["fix_updates"] == 0            # the fixes are all before the dive
     assert p["verdict"] in ("ok", "warning"), p["health"]
-    # streamed: no mission directory, no scan written
+    # streamed: no dataset directory, no scan written
     assert not (tmp_path / "r" / "mission").exists() and not list((tmp_path / "r").rglob("*.pcd"))
 
 
 def test_bag_and_mission_directory_give_the_same_run(dive, tmp_path, capsys):
-    """The same dive through the bag (ENU/FLU messages, NavSatFix) and the mission directory: the same start, the
+    """The same dive through the bag (ENU/FLU messages, NavSatFix) and the dataset directory: the same start, the
     same map, trajectories within millimetres (the bag's float32 fields and pressure conversion)."""
     _, bag = _run(capsys, str(dive / "dive.bag"), "--db", "builtin", "--out", str(tmp_path / "b"), "--mode", "pose")
     _, mis = _run(capsys, str(dive / "mission"), "--db", "builtin", "--out", str(tmp_path / "m"), "--mode", "pose")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from semslam.dataset import PositionFixLog
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 from semslam.run import Attitude, Depth, Fix, Runner, open_dive, run_stream
 from semslam.run.health import HealthLimits, health_verdict
 from semslam.run.sources import dataset_messages
@@ -19,7 +19,7 @@ from semslam.evaluation.slam_run import evaluate_results
 
 @pytest.fixture(scope="module")
 def mission():
-    return square_mission(seed=4, loops=1)
+    return square_dataset(seed=4, loops=1)
 
 
 @pytest.fixture(scope="module")

@@ -54,13 +54,13 @@ def test_cli_builds_the_three_classes_with_the_builtin_sizes(db_path, test_data,
 def test_the_database_recognises_the_parts_in_simulated_scans(db_path):
     from semslam.experiments.recognition_scoring import score_scan
     from semslam.pipeline import ScanRecognizer
-    from semslam.pipeline.mission import detect_mission
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_mission
+    from semslam.pipeline.dataset_detection import detect_dataset
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
     db = load_database(db_path)
-    mission = simulate_mission(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
+    mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
     rows: list[dict] = []
-    found = detect_mission(mission, ScanRecognizer(db), seed=0,
+    found = detect_dataset(mission, ScanRecognizer(db), seed=0,
                            on_scan=lambda rec, cloud, result: rows.extend(score_scan(mission, rec, cloud, result, db)))
     labels = [d.label for dets in found.detections_by_scan.values() for d in dets]
     assert labels and set(labels) <= set(LABELS)

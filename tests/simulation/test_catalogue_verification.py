@@ -44,9 +44,9 @@ def test_verification_config_validated_and_round_trips():
 
 @pytest.fixture(scope="module")
 def cluttered():
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_dataset
 
-    return simulate_mission(SimulatorConfig().replace(world=WorldConfig(clutter=True),
+    return simulate_dataset(SimulatorConfig().replace(world=WorldConfig(clutter=True),
                                                       trajectory=TrajectoryConfig(loops=1)), seed=4)
 
 

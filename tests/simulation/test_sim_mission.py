@@ -15,8 +15,8 @@ from semslam._outdir import MARKER
 from semslam.cli.main import main
 from semslam.errors import DatasetError, SimulationError
 from semslam.geometry import wrap_angle
-from semslam.simulation import AhrsConfig, DepthConfig, DvlConfig, ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_mission
-from semslam.dataset import read_mission, write_mission
+from semslam.simulation import AhrsConfig, DepthConfig, DvlConfig, ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_dataset
+from semslam.dataset import read_dataset, write_dataset
 from semslam.simulation.sensors import dvl_beams_over_slope
 
 
@@ -27,7 +27,7 @@ def _tiny() -> SimulatorConfig:
 
 @pytest.fixture(scope="module")
 def tiny_mission():
-    return simulate_mission(_tiny(), seed=7)
+    return simulate_dataset(_tiny(), seed=7)
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def long_nav():
         ahrs=AhrsConfig(yaw_bias_rad=0.03),
         depth=DepthConfig(bias_m=0.05),
     )
-    return cfg, simulate_mission(cfg, seed=11, with_scans=False)
+    return cfg, simulate_dataset(cfg, seed=11, with_scans=False)
 
 
 def _at_truth(mission, stamps):
@@ -96,7 +96,7 @@ def test_sensor_rates_and_truth(long_nav):
 
 
 def test_no_scans_gives_the_same_navigation(tiny_mission):
-    nav = simulate_mission(_tiny(), seed=7, with_scans=False)
+    nav = simulate_dataset(_tiny(), seed=7, with_scans=False)
     assert nav.scans == [] and nav.scan_clouds is None
     for a, b in [(nav.dvl.velocity_body_mps, tiny_mission.dvl.velocity_body_mps), (nav.attitude.rpy_rad, tiny_mission.attitude.rpy_rad),
                  (nav.depth.depth_m, tiny_mission.depth.depth_m), (nav.truth.position_ned_m, tiny_mission.truth.position_ned_m)]:
@@ -116,20 +116,20 @@ def test_scans_see_the_objects_and_are_stamped(tiny_mission):
 
 
 def test_same_seed_gives_byte_identical_directories(tmp_path, tiny_mission):
-    write_mission(tiny_mission, tmp_path / "a")
-    write_mission(simulate_mission(_tiny(), seed=7), tmp_path / "b")
+    write_dataset(tiny_mission, tmp_path / "a")
+    write_dataset(simulate_dataset(_tiny(), seed=7), tmp_path / "b")
     files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
     assert len(files) == 7 + 2 + len(tiny_mission.scans)  # 6 CSV/JSON, vehicle.toml, index, marker, scans
     _, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", [str(f) for f in files], shallow=False)
     assert mismatch == [MARKER] and not errors  # the ownership marker's id is drawn per directory (semslam._outdir)
-    write_mission(simulate_mission(_tiny(), seed=8), tmp_path / "c")
+    write_dataset(simulate_dataset(_tiny(), seed=8), tmp_path / "c")
     assert (tmp_path / "a" / "dvl.csv").read_bytes() != (tmp_path / "c" / "dvl.csv").read_bytes()
 
 
 def test_mission_round_trips_through_disk(tmp_path, tiny_mission):
     m = tiny_mission
-    out = write_mission(m, tmp_path / "m")
-    r = read_mission(out)
+    out = write_dataset(m, tmp_path / "m")
+    r = read_dataset(out)
     assert r.directory == out and r.seed == 7 and r.scan_clouds is None
     assert json.dumps(r.metadata, sort_keys=True) == json.dumps(m.metadata, sort_keys=True, default=list)
     np.testing.assert_array_equal(r.vehicle.scanner.T_vehicle_scanner.matrix, m.vehicle.scanner.T_vehicle_scanner.matrix)
@@ -155,41 +155,41 @@ def _corrupt(src: Path, dst: Path) -> Path:
 
 
 def test_malformed_missions_raise_mission_errors(tmp_path, tiny_mission):
-    good = write_mission(tiny_mission, tmp_path / "good")
+    good = write_dataset(tiny_mission, tmp_path / "good")
     with pytest.raises(DatasetError, match="does not exist"):
-        read_mission(tmp_path / "nothing")
+        read_dataset(tmp_path / "nothing")
     d = _corrupt(good, tmp_path / "d1")
     (d / "dvl.csv").unlink()
     with pytest.raises(DatasetError, match="dvl.csv"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d2")
     (d / "ahrs.csv").write_text("stamp_s,roll,pitch,yaw\n0,0,0,0\n")
     with pytest.raises(DatasetError, match="header"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d3")
     (d / "depth.csv").write_text("stamp_s,depth_m\n0.0,abc\n")
     with pytest.raises(DatasetError, match="depth.csv.*line 2.*depth_m"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d4")
     meta = json.loads((d / "mission.json").read_text())
     meta["format_version"] = 99
     (d / "mission.json").write_text(json.dumps(meta))
     with pytest.raises(DatasetError, match="format_version"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d5")
     (d / "mission.json").write_text("{not json")
     with pytest.raises(DatasetError, match="JSON"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d6")
     (d / tiny_mission.scans[0].path).unlink()
     with pytest.raises(DatasetError, match="scan_00000.pcd"):
-        read_mission(d)
+        read_dataset(d)
     d = _corrupt(good, tmp_path / "d7")
     (d / "depth.csv").write_text("stamp_s,depth_m\n1.0,5\n0.5,5\n")
     with pytest.raises(DatasetError, match="sorted"):
-        read_mission(d)
+        read_dataset(d)
     with pytest.raises(DatasetError, match="must not exist"):
-        write_mission(tiny_mission, good)
+        write_dataset(tiny_mission, good)
 
 
 def _flight(**kw):
@@ -229,11 +229,11 @@ def test_teleoperated_flight_wanders_but_stays_consistent():
 
 def test_bad_configuration_raises_simulation_error():
     with pytest.raises(SimulationError, match="seed"):
-        simulate_mission(_tiny(), seed=-1, with_scans=False)
+        simulate_dataset(_tiny(), seed=-1, with_scans=False)
     with pytest.raises(SimulationError, match="loops"):
         TrajectoryConfig(loops=0)
     with pytest.raises(SimulationError, match="corner_radius_m"):
-        simulate_mission(SimulatorConfig(trajectory=TrajectoryConfig(corner_radius_m=2.0)), with_scans=False)
+        simulate_dataset(SimulatorConfig(trajectory=TrajectoryConfig(corner_radius_m=2.0)), with_scans=False)
     with pytest.raises(SimulationError, match="speed_wander_mps"):
         TrajectoryConfig(speed_wander_mps=0.1)
     with pytest.raises(SimulationError, match="crab_rms_rad"):
@@ -246,7 +246,7 @@ def test_bad_configuration_raises_simulation_error():
 
 def test_clutter_is_marked_not_in_database():
     cfg = dataclasses.replace(_tiny(), world=WorldConfig(clutter=True, n_clutter=4))
-    m = simulate_mission(cfg, seed=1, with_scans=False)
+    m = simulate_dataset(cfg, seed=1, with_scans=False)
     clutter = [o for o in m.objects if not o.in_database]
     assert len(clutter) == 4 and all(o.label == "clutter" for o in clutter)
 
@@ -256,7 +256,7 @@ def test_cli_simulate(tmp_path, capsys):
     assert main(["simulate", "--out", str(out), "--quick", "--no-scans", "--seed", "3", "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
     assert payload["n_scans"] == 0 and payload["seed"] == 3 and (out / "mission.json").is_file()
-    assert read_mission(out).seed == 3
+    assert read_dataset(out).seed == 3
     assert main(["simulate", "--out", str(out), "--quick", "--no-scans"]) == 1
     assert "--overwrite" in capsys.readouterr().err
     assert main(["simulate", "--out", str(tmp_path / "x"), "--quick", "--scan-rate", "0"]) == 1

@@ -18,7 +18,7 @@ from semslam.dataset import VehicleDescription
 from semslam.detection import Detection
 from semslam.errors import ConfigError, InputError, ReportError, SemslamError, SlamError
 from semslam.experiments.montecarlo import run_montecarlo
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 from semslam.geometry import RigidTransform
 from semslam.report.build import build_report, load_trajectory_csv
 from semslam.slam import SemanticEkf, SlamConfig, SlamSession
@@ -38,7 +38,7 @@ def vehicle() -> VehicleDescription:
 
 @pytest.fixture(scope="module")
 def dataset():
-    return square_mission(seed=0, loops=1)
+    return square_dataset(seed=0, loops=1)
 
 
 # ------------------------------------------------------------------ SlamConfig

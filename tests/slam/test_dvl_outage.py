@@ -12,7 +12,7 @@ from scipy.stats import chi2
 from semslam.dataset import DvlLog, VehicleDescription
 from semslam.errors import ConfigError, SlamError
 from semslam.experiments.outage import OUTAGE_SCENARIOS, outage_table, run_outage_montecarlo, with_dvl_outage
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.slam import SlamConfig, SlamSession
 from semslam.evaluation.motion_noise import measure_unaided_motion
@@ -115,14 +115,14 @@ def test_an_unknown_start_velocity_gets_the_measured_spread():
 def test_the_start_velocity_is_not_taken_from_the_future():
     """A mission whose DVL starts valid only at mid-dive: before the fix, the filter started with that mid-dive
     velocity (known to 5 cm/s) - information from the future, and a NEES of 28 after a first-half outage."""
-    m = with_dvl_outage(square_mission(seed=3, loops=2), 0.0, 0.5)
+    m = with_dvl_outage(square_dataset(seed=3, loops=2), 0.0, 0.5)
     r = run_truth_slam(m, mode="dr", seed=3)
     np.testing.assert_allclose(r.velocity_body_mps[0], 0.0, atol=1e-9)
     assert np.sqrt(r.velocity_cov[0, 0, 0]) == pytest.approx(SlamConfig().motion.unknown_velocity_sigma_mps[0], rel=0.05)
 
 
 def test_with_dvl_outage_marks_only_the_span():
-    m = square_mission(seed=1, loops=1)
+    m = square_dataset(seed=1, loops=1)
     o = with_dvl_outage(m, 0.25, 0.5)
     t = m.dvl.stamp_s
     span = (t >= t[0] + 0.25 * (t[-1] - t[0])) & (t <= t[0] + 0.5 * (t[-1] - t[0]))

@@ -12,7 +12,7 @@ pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip install 
 
 from semslam.detection import Detection  # noqa: E402
 from semslam.errors import SlamError  # noqa: E402
-from semslam.simulation.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_dataset  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
 from semslam.slam import SlamConfig, SlamSession
@@ -31,7 +31,7 @@ def _dmax(a, b) -> float:
 
 @pytest.fixture(scope="module")
 def mission():
-    return square_mission(seed=3, loops=1)
+    return square_dataset(seed=3, loops=1)
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +154,7 @@ def test_a_dive_without_detections_is_dead_reckoning(mission):
 
 
 def test_a_dvl_gap_of_minutes_grows_the_covariance_without_error():
-    m = square_mission(seed=5, loops=2)
+    m = square_dataset(seed=5, loops=2)
     gap = (10.0, 95.0)  # 85 s without DVL
     s = GraphSession(m.vehicle, backend="isam2", mode="pose", start_stamp_s=0.0,
                      initial_position_ned_m=m.truth.position_ned_m[0], initial_velocity_body_mps=[0.3, 0.0, 0.0])

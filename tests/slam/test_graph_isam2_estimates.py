@@ -1,7 +1,7 @@
 """The factor-graph backends (``semslam/slam/graph/``): what iSAM2's streaming estimate is, and which landmark
 updates become graph factors.
 
-One seeded square mission (``square_mission(seed=3, loops=1)``), streamed in ``pose+heading`` mode (AHRS yaw
+One seeded square mission (``square_dataset(seed=3, loops=1)``), streamed in ``pose+heading`` mode (AHRS yaw
 bias estimated): there the graph's optimum of the present and the front-end filter's estimate differ by millimetres
 (the filter's observability-constrained heading Jacobian, the graph's own linearisation points), so a test can
 tell which of the two an estimate is. Each test streams ~25 s of the dive: well under a second."""
@@ -16,7 +16,7 @@ pytest.importorskip('gtsam', reason='the graph backends need GTSAM (pip install 
 from semslam.geometry import RigidTransform, rotation_from_rpy  # noqa: E402
 from semslam.run.dataset_loop import feed_message, merged_messages  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
-from semslam.simulation.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_dataset  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
 from semslam.slam.association import measurement_from_detection  # noqa: E402
 from semslam.slam.graph import GraphSession  # noqa: E402
@@ -27,7 +27,7 @@ T_STOP = 25.0  #: seconds of the dive streamed: two landmarks mapped by then, se
 
 @pytest.fixture(scope="module")
 def stream():
-    mission = square_mission(seed=3, loops=1)
+    mission = square_dataset(seed=3, loops=1)
     dets = simulate_detections(mission, truth_detection_config(mission), seed=3, symmetries={})
     msgs = [m for m in merged_messages(mission, dets) if m[0] <= T_STOP]
     return mission, msgs

@@ -14,7 +14,7 @@ gtsam = pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip 
 
 from semslam.detection import Detection  # noqa: E402
 from semslam.errors import SlamError  # noqa: E402
-from semslam.simulation.synthetic import square_mission  # noqa: E402
+from semslam.simulation.synthetic import square_dataset  # noqa: E402
 from semslam.geometry import RigidTransform  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import truth_detection_config  # noqa: E402
@@ -29,7 +29,7 @@ from semslam.slam.mapping import ObjectMapper  # noqa: E402
 
 @pytest.fixture(scope="module")
 def mission():
-    return square_mission(seed=5, loops=1)
+    return square_dataset(seed=5, loops=1)
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ pytest.importorskip("gtsam", reason="the graph backends need GTSAM (pip install 
 
 from semslam._validation import as_rng  # noqa: E402
 from semslam.errors import InputError  # noqa: E402
-from semslam.experiments.montecarlo import make_mission  # noqa: E402
+from semslam.experiments.montecarlo import make_dataset  # noqa: E402
 from semslam.experiments.outliers import corrupt_detections, outlier_usage  # noqa: E402
 from semslam.simulation.detections import simulate_detections  # noqa: E402
 from semslam.simulation.truth_slam import builtin_symmetries, truth_detection_config  # noqa: E402
@@ -30,7 +30,7 @@ IN_GATE = dict(kind="displaced", translation_m=(0.01, 0.03), rotation_deg=(3.0, 
 
 @pytest.fixture(scope="module")
 def case():
-    mission = make_mission(0)
+    mission = make_dataset(0)
     sym = builtin_symmetries()
     dets = simulate_detections(mission, truth_detection_config(mission), seed=as_rng(0), symmetries=sym)
     return mission, sym, dets

@@ -211,9 +211,9 @@ def test_large_yaw_bias_no_longer_duplicates_the_surveyed_landmark(bias_deg, sig
     draw of the mode's 3-degree prior), made the first sightings of the surveyed ``elbow_1`` fail the linearised
     gate; they made a second ``elbow_1`` and the ATE went to 0.52 m / 0.23 m (0.03 m at 2 degrees). Now the
     surveyed landmark takes the updates, the map has the 4 objects once each and the ATE is that of a small bias."""
-    from semslam.experiments.montecarlo import make_mission, truth_run
+    from semslam.experiments.montecarlo import make_dataset, truth_run
 
-    mission = make_mission(seed, yaw_bias_rad=math.radians(bias_deg))
+    mission = make_dataset(seed, yaw_bias_rad=math.radians(bias_deg))
     cfg = SlamConfig().updated(yaw_bias_sigma_rad=math.radians(sigma_deg))
     res = truth_run(mission, "pose+heading", cfg, seed, backend, surveyed=("elbow_1",))
     objects = collections.Counter(lm.matched_object for lm in res.landmarks)

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from semslam.simulation import DvlConfig, SimulatorConfig, TrajectoryConfig, simulate_mission
+from semslam.simulation import DvlConfig, SimulatorConfig, TrajectoryConfig, simulate_dataset
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.simulation.sensors import gauss_markov
 from semslam.slam import SlamConfig
 from semslam.run import run_slam
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 
 
 def test_gauss_markov_matches_its_analytic_statistics():
@@ -36,7 +36,7 @@ def test_dvl_scale_and_misalignment_are_one_draw_per_mission():
     cfg = SimulatorConfig(trajectory=TrajectoryConfig(loops=1), dvl=dvl)
     ks, deltas = [], []
     for seed in (0, 1, 2):
-        m = simulate_mission(cfg, seed=seed, with_scans=False)
+        m = simulate_dataset(cfg, seed=seed, with_scans=False)
         _, i_s, i_t = np.intersect1d(m.dvl.stamp_s, m.truth.stamp_s, return_indices=True)
         z, v = m.dvl.velocity_body_mps[i_s], m.truth.velocity_body_mps[i_t]
         moving = np.hypot(v[:, 0], v[:, 1]) > 0.05
@@ -53,8 +53,8 @@ def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_vehicle():
     """The filter's DVL model comes from the mission's vehicle description (the simulated sensor's
     specification), never from the simulator's settings: a white DVL gets no calibration states."""
     white = SimulatorConfig(trajectory=TrajectoryConfig(loops=1), dvl=DvlConfig.white())
-    a = simulate_mission(white, seed=3, with_scans=False)
-    real = simulate_mission(white.replace(dvl=DvlConfig()), seed=3, with_scans=False)
+    a = simulate_dataset(white, seed=3, with_scans=False)
+    real = simulate_dataset(white.replace(dvl=DvlConfig()), seed=3, with_scans=False)
     assert not np.allclose(a.dvl.velocity_body_mps[a.dvl.valid], real.dvl.velocity_body_mps[a.dvl.valid])
     np.testing.assert_array_equal(a.dvl.valid, real.dvl.valid)  # same white draws first
     assert a.vehicle.dvl.bias_sigma_mps == 0 and a.vehicle.dvl.scale_factor_sigma == 0
@@ -72,7 +72,7 @@ def test_white_dvl_keeps_the_former_draws_and_the_filter_reads_the_vehicle():
 
 def test_surveyed_landmark_makes_a_constant_yaw_bias_observable():
     bias = math.radians(2.0)
-    m = square_mission(seed=2, loops=2, yaw_bias_rad=bias)
+    m = square_dataset(seed=2, loops=2, yaw_bias_rad=bias)
     sv = ("reducing_socket_0",)
     pose = run_truth_slam(m, mode="pose", seed=2, symmetries={}, surveyed=sv)
     head = run_truth_slam(m, mode="pose+heading", seed=2, symmetries={}, surveyed=sv)
@@ -93,9 +93,9 @@ def test_observability_constraint_keeps_a_constant_yaw_bias_unobservable():
     # without surveyed landmarks a constant yaw bias is unobservable (rotating trajectory + map about the
     # start and shifting the bias changes no measurement): the constrained filter gains no information on it
     # and leaves its estimate at the prior, the plain EKF gains spurious information and wanders
-    from semslam.simulation.synthetic import square_mission
+    from semslam.simulation.synthetic import square_dataset
 
-    m = square_mission(seed=4, loops=2)
+    m = square_dataset(seed=4, loops=2)
     runs = {}
     for oc in (True, False):
         cfg = SlamConfig().updated(observability_constrained=oc)

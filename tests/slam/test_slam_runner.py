@@ -24,7 +24,7 @@ from semslam.simulation.detections import TruthDetectionConfig, simulate_detecti
 from semslam.io.detections import read_detections_jsonl, write_detections_jsonl
 from semslam.slam import SlamConfig
 from semslam.run import run_slam
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 
 
 def test_consensus_rejects_minority_outlier():
@@ -60,7 +60,7 @@ def test_quaternion_mean_matches_scipy_and_is_sign_invariant():
 
 @pytest.fixture(scope="module")
 def mission():
-    return square_mission(seed=4, loops=2)
+    return square_dataset(seed=4, loops=2)
 
 
 def test_pose_slam_maps_every_object_and_bounds_the_error(mission):
@@ -96,7 +96,7 @@ def test_class_gate_prevents_cross_class_association(mission):
 
 
 def test_fault_cases_do_not_diverge():
-    m = square_mission(seed=7, loops=2, dvl_dropout_prob=0.2, dvl_outlier_prob=0.05, dvl_outlier_std_mps=0.3,
+    m = square_dataset(seed=7, loops=2, dvl_dropout_prob=0.2, dvl_outlier_prob=0.05, dvl_outlier_std_mps=0.3,
                        extra_objects=1)
     for mode in ("dr", "pose", "pose+heading"):
         res = run_truth_slam(m, mode=mode, seed=7, symmetries={},
@@ -132,7 +132,7 @@ def test_cli_slam_end_to_end(tmp_path, capsys):
     header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
     assert header[:4] == ["stamp_s", "x_m", "y_m", "z_m"]
     assert main(["slam", str(tmp_path / "missing"), "--out", str(out)]) == 1
-    assert "MISSION" in capsys.readouterr().err
+    assert "DATASET" in capsys.readouterr().err
 
 
 def test_montecarlo_reports_anees_band(tmp_path):
@@ -240,9 +240,9 @@ def test_a_landmark_initialised_while_the_vehicle_drifts_is_not_mapped_twice():
     stamps; without the drift term the new landmark looked 2x more precise relative to the vehicle than it was,
     the next detections failed the gate, and their stale candidates made a duplicate valve 43 s later
     (landmark NEES 70)."""
-    from semslam.experiments.montecarlo import make_mission
+    from semslam.experiments.montecarlo import make_dataset
 
-    m = make_mission(12)
+    m = make_dataset(12)
     assert m.truth is not None and m.objects  # the simulator is part of the package: never a skip
     r = run_truth_slam(m, mode="pose", seed=12, config=SlamConfig().updated(smooth=False))
     assert sorted(lm.label for lm in r.landmarks) == sorted(o.label for o in m.objects)

@@ -12,7 +12,7 @@ import pytest
 from semslam.dataset import PositionFixLog
 from semslam.detection import Detection
 from semslam.errors import SimulationError
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 from semslam.geometry import RigidTransform
 from semslam.slam import SlamConfig, initial_state
 from semslam.run import run_slam
@@ -21,7 +21,7 @@ from semslam.run.dataset_loop import merged_messages
 
 @pytest.fixture(scope="module")
 def mission():
-    return square_mission(seed=3, loops=1)
+    return square_dataset(seed=3, loops=1)
 
 
 def test_same_dive_with_and_without_truth_gives_identical_estimates(mission):

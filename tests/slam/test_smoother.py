@@ -13,7 +13,7 @@ import pytest
 
 from semslam.geometry import rotation_from_rpy
 from semslam.run.rundir import write_run
-from semslam.simulation.synthetic import square_mission
+from semslam.simulation.synthetic import square_dataset
 from semslam.simulation.truth_slam import run_truth_slam
 from semslam.slam import _ekf_kernels as kern, SlamConfig
 from semslam.slam.ekf import SemanticEkf
@@ -114,7 +114,7 @@ def test_recording_leaves_the_filter_unchanged():
 
 
 def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_path):
-    mission = square_mission(seed=2, loops=2)
+    mission = square_dataset(seed=2, loops=2)
     off = run_truth_slam(mission, mode="pose", config=SlamConfig().updated(smooth=False), seed=2)
     on = run_truth_slam(mission, mode="pose", seed=2)
     np.testing.assert_array_equal(off.position_ned_m, on.position_ned_m)
@@ -134,7 +134,7 @@ def test_run_slam_smoothed_trajectory_is_better_and_the_filter_is_unchanged(tmp_
 
 
 def test_smoother_over_budget_is_skipped_and_says_so(tmp_path):
-    mission = square_mission(seed=1, loops=1)
+    mission = square_dataset(seed=1, loops=1)
     res = run_truth_slam(mission, mode="pose", config=SlamConfig().updated(smoother_max_mb=0.01), seed=1)
     assert res.metrics["smoother"]["status"].startswith("skipped")
     assert "ate_rmse_m" not in res.metrics["smoother"]

@@ -241,7 +241,7 @@ class LiveSlam:
             return
         up = None
         if self.up_from_attitude and self._recent_attitude:
-            from ...pipeline.mission import up_from_attitude_samples
+            from ...pipeline.dataset_detection import up_from_attitude_samples
 
             ts, rpy = zip(*self._recent_attitude)
             up = up_from_attitude_samples(np.array(ts), np.array(rpy), self.vehicle.scanner.T_vehicle_scanner,
@@ -291,7 +291,7 @@ class LiveSlam:
 
     # ------------------------------------------------------------------ recognition (worker thread)
     def _work(self) -> None:
-        from ...pipeline.mission import detect_scan
+        from ...pipeline.dataset_detection import detect_scan
 
         while True:
             job = self.slot.get()

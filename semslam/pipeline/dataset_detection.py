@@ -27,7 +27,7 @@ def scan_seed(seed: int, scan_id: int) -> int:
 
 
 @dataclass
-class MissionDetections:
+class DatasetDetections:
     """Detections of a whole dataset and per-scan statistics (``scans``: one dict per scan with ``scan_id``,
     ``stamp_s``, ``n_points``, ``n_clusters``, ``n_detections``, ``n_kept`` and the stage timings in ms)."""
 
@@ -85,7 +85,7 @@ def up_from_attitude_samples(stamps_s: np.ndarray, rpy_rad: np.ndarray, T_vehicl
 def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_s: float, end_stamp_s: float,
                 point_stamps_s, seed: int = 0, keep_unreliable: bool = False, up_scanner=None):
     """One scan through the recogniser (seed ``scan_seed(seed, scan_id)``): ``(kept detections, statistics,
-    result)``. The one step every runner takes per scan (:func:`detect_mission`, :mod:`semslam.run`)."""
+    result)``. The one step every runner takes per scan (:func:`detect_dataset`, :mod:`semslam.run`)."""
     result = recognizer.recognize(cloud, seed=scan_seed(seed, scan_id), stamp_s=end_stamp_s, scan_id=scan_id,
                                   point_stamps_s=point_stamps_s, up_scanner=up_scanner)
     kept = [d for d in result.detections if d.reliable or keep_unreliable]
@@ -95,9 +95,9 @@ def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_
     return kept, stats, result
 
 
-def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
+def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 0, keep_unreliable: bool = False,
                    progress: Progress = False, up_from_attitude: bool = False,
-                   on_scan: Callable[[ScanRecord, object, RecognitionResult], None] | None = None) -> MissionDetections:
+                   on_scan: Callable[[ScanRecord, object, RecognitionResult], None] | None = None) -> DatasetDetections:
     """Recognise the objects of every scan of ``dataset``.
 
     Parameters
@@ -120,11 +120,11 @@ def detect_mission(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         ``on_scan(record, cloud, result)`` after each scan (e.g. scoring against ground truth, figures).
     """
     if not isinstance(dataset, Dataset):
-        raise InputError(f"The 'dataset' argument of detect_mission must be a Dataset. Got {type(dataset).__name__} instead.")
+        raise InputError(f"The 'dataset' argument of detect_dataset must be a Dataset. Got {type(dataset).__name__} instead.")
     if not isinstance(recognizer, ScanRecognizer):
-        raise InputError(f"The 'recognizer' argument of detect_mission must be a ScanRecognizer. Got "
+        raise InputError(f"The 'recognizer' argument of detect_dataset must be a ScanRecognizer. Got "
                          f"{type(recognizer).__name__} instead.")
-    out = MissionDetections()
+    out = DatasetDetections()
     scans = dataset.scans
     with progress_steps(progress, len(scans), "recognise", "scan") as step:
         for rec in scans:

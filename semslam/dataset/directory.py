@@ -1,5 +1,5 @@
-"""Mission directories: the on-disk form of a :class:`~semslam.dataset.Dataset` (format version 2; version 1,
-written by semslam <= 0.1, is refused with a one-line error). Documented in docs/mission-format.md.
+"""Dataset directories: the on-disk form of a :class:`~semslam.dataset.Dataset` (format version 2; version 1,
+written by semslam <= 0.1, is refused with a one-line error). Documented in docs/dataset-format.md.
 
 ::
 
@@ -70,7 +70,7 @@ def _table(header: tuple[str, ...], *columns: np.ndarray) -> str:
     return _csv_text(header, rows)
 
 
-def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bool = False) -> Path:
+def write_dataset(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write ``mission`` to the directory ``out_dir`` (created; must not exist unless ``overwrite``).
 
     Scans come from ``mission.load_scan`` (in memory for a simulated mission) and are written with
@@ -82,11 +82,11 @@ def write_mission(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
         If ``out_dir`` exists (without ``overwrite``) or a scan cannot be written.
     """
     if not isinstance(mission, Dataset):
-        raise DatasetError(f"The 'mission' argument of write_mission must be a Dataset. Got {type(mission).__name__} instead.")
+        raise DatasetError(f"The 'mission' argument of write_dataset must be a Dataset. Got {type(mission).__name__} instead.")
     out = Path(out_dir)
     # only a mission semslam's marker proves it wrote is replaced (semslam._outdir), never the mission's own source
     if out.exists() and not overwrite:
-        raise DatasetError(f"The 'out_dir' argument of write_mission must not exist (use overwrite). Got existing {str(out)!r} instead.")
+        raise DatasetError(f"The 'out_dir' argument of write_dataset must not exist (use overwrite). Got existing {str(out)!r} instead.")
     with staged_output_dir(out, overwrite=True, kind="mission", option="out_dir",
                            inputs=(mission.directory,)) as tmp:
         _write_into(mission, tmp)
@@ -182,8 +182,8 @@ def _floats(path: Path, header: tuple[str, ...], extra_prefix: str = "") -> np.n
         raise
 
 
-def read_mission(directory: str | os.PathLike) -> Dataset:
-    """Read a mission directory written by :func:`write_mission` (scans stay on disk; load them with
+def read_dataset(directory: str | os.PathLike) -> Dataset:
+    """Read a dataset directory written by :func:`write_dataset` (scans stay on disk; load them with
     ``mission.load_scan(scan_id)``).
 
     Raises
@@ -194,7 +194,7 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
     """
     d = Path(directory)
     if not d.is_dir():
-        raise DatasetError(f"The mission directory {str(d)!r} does not exist.")
+        raise DatasetError(f"The dataset directory {str(d)!r} does not exist.")
     meta_path = d / "mission.json"
     if not meta_path.is_file():
         raise DatasetError(f"The mission file {str(meta_path)!r} is missing.")
@@ -205,7 +205,7 @@ def read_mission(directory: str | os.PathLike) -> Dataset:
     if isinstance(meta, dict) and meta.get("format_version") == 1:
         raise DatasetError(f"The mission file {str(meta_path)!r} has format_version 1 (semslam <= 0.1), which this "
                            f"semslam no longer reads: simulate the dive again, or write the dataset again with "
-                           f"semslam.dataset.write_mission.")
+                           f"semslam.dataset.write_dataset.")
     if not isinstance(meta, dict) or meta.get("format_version") not in SUPPORTED_VERSIONS:
         got = meta.get("format_version") if isinstance(meta, dict) else meta
         raise DatasetError(f"The mission file {str(meta_path)!r} must have format_version in {SUPPORTED_VERSIONS}. Got {got!r} instead.")
