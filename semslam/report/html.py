@@ -54,7 +54,9 @@ def _table_html(caption: str, header: Sequence[str], rows: Sequence[Sequence[obj
 
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
-    table = f"<table><caption>{html.escape(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    table = (
+        f"<table><caption>{html.escape(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    )
     if len(rows) > COLLAPSE_ROWS:  # a long table is one line until the reader opens it
         return (f"<details><summary>{html.escape(caption)}: {len(rows)} rows (click to show)</summary>"
                 f"{table}</details>")
@@ -76,16 +78,47 @@ details{margin:1em 0}summary{cursor:pointer;font-weight:600}.verdict-met{color:#
 """
 
 
+#: in the head of every report semslam writes: what proves a report.html (and its figures/) are semslam's to rebuild
+GENERATOR = "<meta name='generator' content='semslam report'>"
+
+
+def check_report_target(run_dir: Path, figure_names: Sequence[str]) -> None:
+    """A report is rebuilt in place only over files semslam wrote: in a directory semslam owns (its marker), or
+    where report.html is semslam's (:data:`GENERATOR`). Elsewhere an existing report.html, or a figure file of the
+    same name, is someone else's: :class:`~semslam.errors.ReportError`, nothing written."""
+    from .._outdir import is_owned
+    from ..errors import ReportError
+
+    if is_owned(run_dir):
+        return
+    report = run_dir / "report.html"
+    ours = False
+    if report.is_file():
+        with open(report, "rb") as f:
+            ours = GENERATOR.encode() in f.read(4096)
+    if report.exists() and not ours:
+        raise ReportError(f"The directory '{run_dir}' holds a report.html semslam did not write: it is left as it is. "
+                          f"Move it away, or report a directory semslam wrote.")
+    if not ours:
+        clash = sorted(n for n in set(figure_names) if (run_dir / "figures" / n).exists())
+        if clash:
+            raise ReportError(f"The directory '{run_dir}' holds figures/{clash[0]} that semslam did not write (no "
+                              f"semslam report.html beside it): it is left as it is. Move it away first.")
+
+
 def write_report(run_dir: str | Path, title: str, sections: Sequence[Section], *, metrics: dict | None = None,
                  summary: str = "", figure_files: bool = True) -> Path:
     """Write every figure as PNG into ``run_dir/figures`` and ``run_dir/report.html`` (atomically).
 
     ``metrics``: the run's metrics, linked as ``metrics.json`` (written beside the report when it is not there
-    yet), never dumped into the page. ``figure_files``: False embeds the figures only (no ``figures/``). Tables longer than :data:`COLLAPSE_ROWS` rows are collapsed. Returns the
+    yet), never dumped into the page. ``figure_files``: False embeds the figures only (no ``figures/``). Tables longer
+    than :data:`COLLAPSE_ROWS` rows are collapsed. Returns the
     report's path.
     """
     run_dir = Path(run_dir)
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+    if figure_files:
+        check_report_target(run_dir, [fig.filename for sec in sections for fig in sec.figures])
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'>{GENERATOR}<title>{html.escape(title)}</title>"
              f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
     if summary:
         parts.append(f"<p>{html.escape(summary)}</p>")
