@@ -105,5 +105,6 @@ def as_rng(seed: "int | np.random.Generator | None", *, caller: str = "") -> np.
         return np.random.default_rng(seed)
     where = f" of {caller}" if caller else ""
     raise InputError(
-        f"The 'seed' argument{where} must be a non-negative integer or a numpy Generator. Got {_describe(seed)} instead."
+        f"The 'seed' argument{where} must be a non-negative integer or a numpy Generator. Got {_describe(seed)} "
+        f"instead."
     )

@@ -60,13 +60,16 @@ class PointCloud:
         vp = as_float_array("viewpoint_xyz_m", self.viewpoint_xyz_m, (3,), caller="PointCloud")
         object.__setattr__(self, "viewpoint_xyz_m", _frozen(vp))
         if not isinstance(self.frame_id, str) or not self.frame_id:
-            raise InputError(f"The 'frame_id' argument of PointCloud must be a non-empty string. Got {self.frame_id!r} instead.")
+            raise InputError(
+                f"The 'frame_id' argument of PointCloud must be a non-empty string. Got {self.frame_id!r} instead."
+            )
         checked: dict[str, np.ndarray] = {}
         for name, values in dict(self.fields).items():
             arr = np.asarray(values)
             if arr.ndim not in (1, 2) or len(arr) != n:
                 raise InputError(
-                    f"The field {name!r} of PointCloud must have {n} rows (one per point). Got shape {arr.shape} instead."
+                    f"The field {name!r} of PointCloud must have {n} rows (one per point). Got shape {arr.shape} "
+                    f"instead."
                 )
             checked[str(name)] = _frozen(np.array(arr, copy=True))
         object.__setattr__(self, "fields", checked)
@@ -88,7 +91,8 @@ class PointCloud:
         if idx.dtype == bool:
             if idx.shape != (self.n_points,):
                 raise InputError(
-                    f"The 'indices' mask of PointCloud.select must have shape ({self.n_points},). Got {idx.shape} instead."
+                    f"The 'indices' mask of PointCloud.select must have shape ({self.n_points},). Got {idx.shape} "
+                    f"instead."
                 )
         elif idx.size and (idx.min() < -self.n_points or idx.max() >= self.n_points):
             raise InputError(
@@ -106,7 +110,9 @@ class PointCloud:
 
     def with_normals(self, normals_xyz: Any) -> "PointCloud":
         """The same cloud with ``normals_xyz`` replaced."""
-        return PointCloud(self.points_xyz_m, normals_xyz, self.intensity, self.viewpoint_xyz_m, self.frame_id, self.fields)
+        return PointCloud(
+            self.points_xyz_m, normals_xyz, self.intensity, self.viewpoint_xyz_m, self.frame_id, self.fields
+        )
 
     def transformed(self, T_new_old: Any, frame_id: str | None = None) -> "PointCloud":
         """The cloud expressed in another frame: points, normals and viewpoint mapped by ``T_new_old``."""

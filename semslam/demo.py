@@ -13,7 +13,8 @@ Run directory layout (every file written atomically)::
       recognition.json     every cluster of every scan against the ground truth, pose errors, timings
       fig3_scan.npz        the scan drawn in Fig. 3 (points, cluster labels)
       consensus.json       the observations behind the first landmark's initialisation
-      slam/<mode>/         trajectory.csv, trajectory_smoothed.csv, landmarks.csv, updates.csv, metrics.json, config.json per mode
+      slam/<mode>/         trajectory.csv, trajectory_smoothed.csv, landmarks.csv, updates.csv, metrics.json,
+      config.json per mode
       metrics.json         the headline metrics of every stage
       figures/*.png        every figure of the report
       report.html          one self-contained page (figures embedded)
@@ -78,12 +79,18 @@ class DemoConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise InputError(f"The 'seed' argument of DemoConfig must be a non-negative integer. Got {self.seed!r} instead.")
-        if self.loops is not None and (isinstance(self.loops, bool) or not isinstance(self.loops, int) or self.loops < 1):
+            raise InputError(
+                f"The 'seed' argument of DemoConfig must be a non-negative integer. Got {self.seed!r} instead."
+            )
+        if self.loops is not None and (
+            isinstance(self.loops, bool) or not isinstance(self.loops, int) or self.loops < 1
+        ):
             raise InputError(f"The 'loops' argument of DemoConfig must be an integer >= 1. Got {self.loops!r} instead.")
         bad = [m for m in self.modes if m not in MODES]
         if bad or not self.modes:
-            raise InputError(f"The 'modes' argument of DemoConfig must be a non-empty subset of {MODES}. Got {self.modes!r} instead.")
+            raise InputError(
+                f"The 'modes' argument of DemoConfig must be a non-empty subset of {MODES}. Got {self.modes!r} instead."
+            )
 
     @property
     def n_loops(self) -> int:

@@ -47,17 +47,22 @@ class Detection:
 
     def __post_init__(self) -> None:
         if not isinstance(self.label, str) or not self.label:
-            raise InputError(f"The 'label' argument of Detection must be a non-empty string. Got {self.label!r} instead.")
+            raise InputError(
+                f"The 'label' argument of Detection must be a non-empty string. Got {self.label!r} instead."
+            )
         if not isinstance(self.T_sensor_object, RigidTransform):
             object.__setattr__(self, "T_sensor_object", RigidTransform(self.T_sensor_object))
         cov = as_float_array("covariance_6x6", self.covariance_6x6, (6, 6), caller="Detection")
         asym = float(np.abs(cov - cov.T).max())
         if asym > 1e-9 * max(1.0, float(np.abs(cov).max())):
-            raise InputError(f"The 'covariance_6x6' argument of Detection must be symmetric. Got max |C - C^T| = {asym:.3g} instead.")
+            raise InputError(
+                f"The 'covariance_6x6' argument of Detection must be symmetric. Got max |C - C^T| = {asym:.3g} instead."
+            )
         min_eig = float(np.linalg.eigvalsh(0.5 * (cov + cov.T)).min())
         if min_eig < -1e-12 * max(1.0, float(np.abs(cov).max())):
             raise InputError(
-                f"The 'covariance_6x6' argument of Detection must be positive semi-definite. Got smallest eigenvalue {min_eig:.3g} instead."
+                f"The 'covariance_6x6' argument of Detection must be positive semi-definite. Got smallest eigenvalue "
+                f"{min_eig:.3g} instead."
             )
         cov = 0.5 * (cov + cov.T)
         cov.setflags(write=False)
@@ -86,7 +91,9 @@ class Detection:
         if not isinstance(d, dict):
             raise InputError(f"A detection record must be a JSON object. Got {type(d).__name__} instead.")
         if not isinstance(d.get("reliable", True), bool):  # "false" would be truthy
-            raise InputError(f"A detection record's 'reliable' must be true or false. Got {d.get('reliable')!r} instead.")
+            raise InputError(
+                f"A detection record's 'reliable' must be true or false. Got {d.get('reliable')!r} instead."
+            )
         if not isinstance(d.get("label"), str):
             raise InputError(f"A detection record's 'label' must be a string. Got {d.get('label')!r} instead.")
         try:

@@ -109,7 +109,9 @@ def rotation_from_quat_wxyz(quat_wxyz: Any) -> np.ndarray:
     q = as_float_array("quat_wxyz", quat_wxyz, (4,), caller="rotation_from_quat_wxyz")
     n = np.linalg.norm(q)
     if n < 1e-12:
-        raise InputError("The 'quat_wxyz' argument of rotation_from_quat_wxyz must have a non-zero norm. Got 0 instead.")
+        raise InputError(
+            "The 'quat_wxyz' argument of rotation_from_quat_wxyz must have a non-zero norm. Got 0 instead."
+        )
     w, x, y, z = q / n
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],

@@ -41,17 +41,24 @@ class Symmetry:
             object.__setattr__(self, "order", 1)
             return
         if self.axis_object is None:
-            raise InputError(f"The 'axis_object' argument of Symmetry is required for kind {self.kind!r}. Got None instead.")
+            raise InputError(
+                f"The 'axis_object' argument of Symmetry is required for kind {self.kind!r}. Got None instead."
+            )
         axis = as_float_array("axis_object", self.axis_object, (3,), caller="Symmetry")
         n = float(np.linalg.norm(axis))
         if n < 1e-9:
-            raise InputError("The 'axis_object' argument of Symmetry must be a non-zero vector. Got a zero vector instead.")
+            raise InputError(
+                "The 'axis_object' argument of Symmetry must be a non-zero vector. Got a zero vector instead."
+            )
         axis = axis / n
         axis.setflags(write=False)
         object.__setattr__(self, "axis_object", axis)
         if self.kind == "discrete":
             if isinstance(self.order, bool) or not isinstance(self.order, (int, np.integer)) or self.order < 2:
-                raise InputError(f"The 'order' argument of Symmetry must be an integer >= 2 for a discrete symmetry. Got {self.order!r} instead.")
+                raise InputError(
+                    f"The 'order' argument of Symmetry must be an integer >= 2 for a discrete symmetry. Got "
+                    f"{self.order!r} instead."
+                )
             object.__setattr__(self, "order", int(self.order))
         else:
             object.__setattr__(self, "order", 0)  # 0 = infinite
@@ -143,7 +150,11 @@ class Symmetry:
         if self.kind == "none":
             return R.copy()
         if self.kind == "discrete":
-            R_ref = np.eye(3) if reference is None else check_rotation("reference", reference, caller="Symmetry.canonicalize")
+            R_ref = (
+                np.eye(3)
+                if reference is None
+                else check_rotation("reference", reference, caller="Symmetry.canonicalize")
+            )
             cands = R @ self.group_rotations()
             traces = np.trace(R_ref.T @ cands, axis1=1, axis2=2)
             best = int(np.flatnonzero(traces >= traces.max() - 1e-12)[0])

@@ -147,8 +147,17 @@ def row_from_run_dir(run: Path, source: str) -> dict:
     if (run / "run.json").is_file():
         verdict = json.loads((run / "run.json").read_text(encoding="utf-8")).get("verdict", "ok")
     status = "bad" if verdict == "bad" else "ok"
-    return {"dive": run.name, "source": source, "status": status, "health": verdict, "error": "", "duration_s": duration,
-            "detections": n_det, "modes": modes, "report": "report.html" if (run / "report.html").is_file() else None}
+    return {
+        "dive": run.name,
+        "source": source,
+        "status": status,
+        "health": verdict,
+        "error": "",
+        "duration_s": duration,
+        "detections": n_det,
+        "modes": modes,
+        "report": "report.html" if (run / "report.html").is_file() else None,
+    }
 
 
 def _modes(rows: list) -> list:

@@ -21,7 +21,9 @@ def load_dataset(spec: str, vehicle: str | None = None):
         try:
             seed = int(spec.split(":", 1)[1])
         except ValueError:
-            raise InputError(f"The DATASET argument must be a directory or synthetic:SEED. Got {spec!r} instead.") from None
+            raise InputError(
+                f"The DATASET argument must be a directory or synthetic:SEED. Got {spec!r} instead."
+            ) from None
         ds = square_dataset(seed=seed)
     else:
         path = Path(spec)

@@ -67,6 +67,12 @@ def run_export(args: argparse.Namespace) -> int:
     ds = read_dataset(out)
     payload = {"directory": str(out), "n_scans": len(ds.scans), "n_attitude": len(ds.attitude),
                "n_dvl": len(ds.dvl), "n_depth": len(ds.depth), "duration_s": ds.duration_s}
-    emit(args, payload, lambda: f"wrote {out}: {ds.duration_s:.1f} s, {len(ds.scans)} scans, attitude {len(ds.attitude)}"
-                                f" / DVL {len(ds.dvl)} / depth {len(ds.depth)} samples")
+    emit(
+        args,
+        payload,
+        lambda: (
+            f"wrote {out}: {ds.duration_s:.1f} s, {len(ds.scans)} scans, attitude {len(ds.attitude)}"
+            f" / DVL {len(ds.dvl)} / depth {len(ds.depth)} samples"
+        ),
+    )
     return 0

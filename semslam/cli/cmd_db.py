@@ -44,9 +44,12 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     src.add_argument("views_dir", nargs="?", metavar="VIEWS_DIR", help="folder CLASS/VIEW.{pcd,ply,npy}")
     src.add_argument("--builtin", action="store_true",
                      help="the four built-in objects acquired by the simulated Kinect-like camera")
-    src.add_argument("--models", metavar="MODELS_DIR",
-                     help="your CAD models (STL, OBJ, PLY, COLLADA, glTF, STEP + models.toml: file, unit, symmetry, T_mesh_object per "
-                          "class) acquired by the simulated Kinect-like camera")
+    src.add_argument(
+        "--models",
+        metavar="MODELS_DIR",
+        help="your CAD models (STL, OBJ, PLY, COLLADA, glTF, STEP + models.toml: file, unit, symmetry, T_mesh_object per "
+        "class) acquired by the simulated Kinect-like camera",
+    )
     build.add_argument("--fuse", action="store_true",
                        help="VIEWS_DIR views are in their own sensor frames: align each class's views into one "
                             "object frame (CLASS/poses.csv with T_object_sensor per view if present, else "
@@ -59,17 +62,27 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     build.add_argument("--out", required=True, metavar="DB", help="database file to write (.npz)")
     build.add_argument("--overwrite", action="store_true", help="replace the --out file if it exists")
     build.add_argument("--n-views", type=int, default=8, help="views per object with --builtin/--models (default 8)")
-    build.add_argument("--kinect-elevation", type=float, default=75.0, metavar="DEG",
-                       help="camera elevation of the --builtin/--models views, degrees (default 75: the survey geometry; "
-                            "the papers used 45)")
+    build.add_argument(
+        "--kinect-elevation",
+        type=float,
+        default=75.0,
+        metavar="DEG",
+        help="camera elevation of the --builtin/--models views, degrees (default 75: the survey geometry; "
+        "the papers used 45)",
+    )
     build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
                        help="camera distance of the --builtin/--models views, metres (default 1.5; the papers ~0.7)")
     build.add_argument("--sensor", default="kinect", choices=("kinect", "laser", "kinect+laser"),
                        help="with --builtin/--models: the recognition views' sensor: the Kinect-like camera (default), "
                             "the missions' laser scanner from route-like viewpoints (--n-views headings, "
                             "semslam.simulation.laser_views), or both; the pose-model views stay Kinect views")
-    build.add_argument("--model-views", type=int, default=8, metavar="N",
-                       help="pose-model views per object with --builtin/--models (default 8; 0: pose uses the recognition views)")
+    build.add_argument(
+        "--model-views",
+        type=int,
+        default=8,
+        metavar="N",
+        help="pose-model views per object with --builtin/--models (default 8; 0: pose uses the recognition views)",
+    )
     build.add_argument("--model-elevation", type=float, default=60.0, metavar="DEG",
                        help="camera elevation of the --builtin/--models pose-model views, degrees (default 60)")
     build.add_argument("--model-distance", type=float, default=0.7, metavar="M",
@@ -147,8 +160,12 @@ def run_build(args: argparse.Namespace) -> int:
 
             raise InputError(f"The '--model-views' option must be >= 0. Got {args.model_views} instead.")
         if args.model_views:
-            model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
-            kwargs["model_views"], _ = builtin_view_clouds(seed=args.seed, n_views=args.model_views, config=model_kinect)
+            model_kinect = KinectConfig(
+                elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance
+            )
+            kwargs["model_views"], _ = builtin_view_clouds(
+                seed=args.seed, n_views=args.model_views, config=model_kinect
+            )
         from ..simulation.cad_models import with_resting_up
         from ..simulation.objects import builtin_objects
 

@@ -6,19 +6,29 @@ import argparse
 
 
 def register(sub, common) -> None:
-    p = sub.add_parser("demo", parents=[common], help="simulate the tank, recognise, run SLAM in every mode, write a report",
-                       description="Build the built-in database, evaluate it, simulate the default tank mission, run the "
-                                   "recognition and pose pipeline on every scan, run SLAM in every mode on the same "
-                                   "detections, and write a run directory with report.html.")
+    p = sub.add_parser(
+        "demo",
+        parents=[common],
+        help="simulate the tank, recognise, run SLAM in every mode, write a report",
+        description="Build the built-in database, evaluate it, simulate the default tank mission, run the "
+        "recognition and pose pipeline on every scan, run SLAM in every mode on the same "
+        "detections, and write a run directory with report.html.",
+    )
     p.add_argument("--out", default="runs/demo", help="run directory (default runs/demo)")
     p.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
-    p.add_argument("--quick", action="store_true", help="two loops and one SVM grid search: a first look in well under a minute")
+    p.add_argument(
+        "--quick", action="store_true", help="two loops and one SVM grid search: a first look in well under a minute"
+    )
     p.add_argument("--loops", type=int, default=None, help="loops of the mission (default 3, 2 with --quick)")
     p.add_argument("--overwrite", action="store_true", help="replace the run directory if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("--models", default=None, metavar="DIR",
-                   help="your CAD models (models.toml + STL/OBJ/PLY/DAE/glTF/STEP, as for 'db build --models'): the database and the "
-                        "mission's objects are yours instead of the built-in fittings")
+    p.add_argument(
+        "--models",
+        default=None,
+        metavar="DIR",
+        help="your CAD models (models.toml + STL/OBJ/PLY/DAE/glTF/STEP, as for 'db build --models'): the database and the "
+        "mission's objects are yours instead of the built-in fittings",
+    )
     p.set_defaults(func=run)
 
 
@@ -44,10 +54,12 @@ def summary_text(metrics: dict) -> str:
                                                             for k, v in loo.items()))
     r = metrics.get("recognition", {})
     if r:
-        lines.append(f"recognition: {r['n_detections']} detections in {r['n_scans']} scans, precision "
-                     f"{_pct(r['precision'])}, recall {_pct(r['recall'])}, median pose error "
-                     f"{r['pose_median_rotation_error_deg']:.1f} deg / {1000 * r['pose_median_translation_error_m']:.1f} mm, "
-                     f"median latency {r['scan_latency_ms_median']:.0f} ms/scan")
+        lines.append(
+            f"recognition: {r['n_detections']} detections in {r['n_scans']} scans, precision "
+            f"{_pct(r['precision'])}, recall {_pct(r['recall'])}, median pose error "
+            f"{r['pose_median_rotation_error_deg']:.1f} deg / {1000 * r['pose_median_translation_error_m']:.1f} mm, "
+            f"median latency {r['scan_latency_ms_median']:.0f} ms/scan"
+        )
     slam = metrics.get("slam", {})
     if slam:
         lines.append("")

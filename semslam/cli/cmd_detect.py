@@ -23,8 +23,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     add_config_options(p, "the pipeline")  # OUT.config.json and a bare PipelineConfig table are read too
     p.add_argument("--vehicle", help="vehicle description (TOML) replacing the dive's; 'girona500' for the defaults; "
                                      "default: the mission's, or BAG.vehicle.toml beside the bag")
-    p.add_argument("--topics", help="topic map of a bag (TOML); default: BAG.topics.toml beside the bag, else the bag's "
-                                    "own evidence (a frame it cannot establish is an error, never a guess)")
+    p.add_argument(
+        "--topics",
+        help="topic map of a bag (TOML); default: BAG.topics.toml beside the bag, else the bag's "
+        "own evidence (a frame it cannot establish is an error, never a guess)",
+    )
     p.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="message definitions (bags)")
     p.add_argument("--seed", type=int, help="seed of the run (scan k uses seed * 100003 + k; default 0, or --config's)")
     p.add_argument("--keep-unreliable", action="store_true", help="keep detections whose pose is flagged unreliable")
@@ -32,7 +35,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                    help="pose every scan's objects upright about the up direction of the vehicle's attitude at that "
                         "scan (classes whose database records their up: db build --fuse --up)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--overwrite", action="store_true", help="replace FILE.jsonl and FILE.jsonl.config.json if they exist")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace FILE.jsonl and FILE.jsonl.config.json if they exist"
+    )
     p.set_defaults(func=run)
 
 

@@ -19,8 +19,12 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     parser.add_argument("--classifier", choices=("chi2", "svm"), default="chi2",
                         help="chi-square nearest view, or RBF SVM with Hsu et al.'s grid search (default chi2)")
     parser.add_argument("--seed", type=int, default=0, help="seed (SVM folds; ESF when building from a folder)")
-    parser.add_argument("--jobs", type=int, default=-1,
-                        help="processes fitting the SVM folds (default -1: every core; the result does not depend on it)")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=-1,
+        help="processes fitting the SVM folds (default -1: every core; the result does not depend on it)",
+    )
     parser.set_defaults(func=run)
 
 

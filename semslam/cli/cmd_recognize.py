@@ -76,11 +76,16 @@ def _fmt_detection(i: int, d: dict, outcome: dict) -> list[str]:
             f"reliable {'yes' if d['reliable'] else 'no'}  fitness {fit}  rmse {rmse}")
     pose = (f"    xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]"
             f"  quat_wxyz [{', '.join(f'{v:.4f}' for v in q)}]")
-    lines = [head, pose,
-             "    T_scanner_object = " + " / ".join("[" + ", ".join(f"{v: .4f}" for v in row) + "]" for row in T["matrix"]),
-             "    sigma (x y z m, roll pitch yaw deg) = "
-             + ", ".join(f"{v:.4f}" for v in sig[:3]) + " | " + ", ".join(f"{np.degrees(v):.2f}" for v in sig[3:]),
-             "    covariance_6x6 = " + " / ".join("[" + ", ".join(f"{v:.3e}" for v in row) + "]" for row in cov)]
+    lines = [
+        head,
+        pose,
+        "    T_scanner_object = " + " / ".join("[" + ", ".join(f"{v: .4f}" for v in row) + "]" for row in T["matrix"]),
+        "    sigma (x y z m, roll pitch yaw deg) = "
+        + ", ".join(f"{v:.4f}" for v in sig[:3])
+        + " | "
+        + ", ".join(f"{np.degrees(v):.2f}" for v in sig[3:]),
+        "    covariance_6x6 = " + " / ".join("[" + ", ".join(f"{v:.3e}" for v in row) + "]" for row in cov),
+    ]
     if outcome.get("touches_border"):
         lines.append("    (cluster touches the scan border)")
     return lines
@@ -175,7 +180,9 @@ def run(args: argparse.Namespace) -> int:
     if args.attached and raw.get("attached") is None:
         raw["attached"] = {}
     raw["segmentation"] = _segmentation_table(args, raw.get("segmentation", {}))
-    config = PipelineConfig.from_dict(raw, source=f"the --config file {args.config!r}" if args.config else "one of the options")
+    config = PipelineConfig.from_dict(
+        raw, source=f"the --config file {args.config!r}" if args.config else "one of the options"
+    )
     t0 = time.perf_counter()
     if args.db == "builtin":
         from ..simulation.builtin_db import builtin_database  # the simulator (trimesh...) only when asked for
@@ -188,10 +195,12 @@ def run(args: argparse.Namespace) -> int:
     if config.up_scanner is not None:
         no_up = [c for c in db.classes if db.up_object(c) is None]
         if no_up:
-            notes.append(f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
-                         f"{'it' if len(no_up) == 1 else 'them'} (a model that rests on either of two faces has none; for your "
-                         "scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
-                         "their pose search spans all orientations")
+            notes.append(
+                f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
+                f"{'it' if len(no_up) == 1 else 'them'} (a model that rests on either of two faces has none; for your "
+                "scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
+                "their pose search spans all orientations"
+            )
     scan = read_point_cloud(args.scene)
     result = ScanRecognizer(db, config, seed=args.seed).recognize(scan, seed=args.seed)
     timings = {"load_db": t_db, **result.timings_ms}

@@ -15,7 +15,8 @@ or the time budget runs out before the RANSAC.
 
 Bounded: ``--time-budget S`` (default 10 s, 0 = none) counts from the process start (reading included);
 ``--voxel auto`` (default) picks the leaf from the clouds' spacing and extent (at most ``--max-voxels``
-source voxels, 4x as many target voxels); far outliers are cropped; ``--remove-outliers`` adds statistical outlier removal.
+source voxels, 4x as many target voxels); far outliers are cropped; ``--remove-outliers`` adds statistical outlier
+removal.
 """
 
 from __future__ import annotations
@@ -136,7 +137,9 @@ def run(args: argparse.Namespace) -> int:
     except RegistrationError as exc:  # name the files: "the target cloud" alone does not say which
         note = (f" (--time-budget {args.time_budget:g} s counts from the command's start: "
                 f"{cfg.time_budget_s:.3g} s were left for register)") if "time budget" in str(exc) else ""
-        raise RegistrationError(f"Cannot register SOURCE {args.source} onto TARGET {args.target}: {exc}{note}") from None
+        raise RegistrationError(
+            f"Cannot register SOURCE {args.source} onto TARGET {args.target}: {exc}{note}"
+        ) from None
     if args.out and res.converged:
         _write_aligned(args, source.transformed(res.T_target_source, frame_id=target.frame_id))
     payload = {"source": args.source, "target": args.target, "config": cfg.to_dict(), "seed": args.seed,
@@ -154,11 +157,13 @@ def run(args: argparse.Namespace) -> int:
                        if res.extras["ambiguous"] else ", NOT reliable: low fitness of the answer")
         if res.extras.get("budget_exhausted"):
             status += f", time budget of {args.time_budget:g} s exhausted"
-        return (f"T_target_source ({status}):\n{rows}\n"
-                f"xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]\n"
-                f"fitness {res.fitness:.4f} (inliers within {res.max_correspondence_m:.4g} m), "
-                f"inlier RMSE {1e3 * res.inlier_rmse_m:.3f} mm\n"
-                f"voxel {res.extras.get('voxel_m', float('nan')):.4g} m, timings: {times}")
+        return (
+            f"T_target_source ({status}):\n{rows}\n"
+            f"xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]\n"
+            f"fitness {res.fitness:.4f} (inliers within {res.max_correspondence_m:.4g} m), "
+            f"inlier RMSE {1e3 * res.inlier_rmse_m:.3f} mm\n"
+            f"voxel {res.extras.get('voxel_m', float('nan')):.4g} m, timings: {times}"
+        )
 
     emit(args, payload, text)
     return 0 if res.converged else 1
@@ -196,11 +201,13 @@ def _run_upright(args: argparse.Namespace, source, target) -> int:
                                                      else f"NOT reliable: fitness below {0.5:g}")
         alts = ", ".join(f"{h['yaw_deg']:+.1f} deg (rms {1e3 * h['rms_m']:.2f} mm)" for h in ex["hypotheses"])
         times = ", ".join(f"{k} {v:.0f} ms" for k, v in res.timings_ms.items())
-        return (f"T_target_source (upright, {verdict}):\n{rows}\n"
-                f"xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]\n"
-                f"yaw about up sigma {ex['yaw_sigma_deg']:.2f} deg; hypotheses (yaw about the target's up): {alts}\n"
-                f"fitness {res.fitness:.4f} (inliers within {res.max_correspondence_m:.4g} m), "
-                f"inlier RMSE {1e3 * res.inlier_rmse_m:.3f} mm\ntimings: {times}")
+        return (
+            f"T_target_source (upright, {verdict}):\n{rows}\n"
+            f"xyz_m [{xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}]  rpy_deg [{rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f}]\n"
+            f"yaw about up sigma {ex['yaw_sigma_deg']:.2f} deg; hypotheses (yaw about the target's up): {alts}\n"
+            f"fitness {res.fitness:.4f} (inliers within {res.max_correspondence_m:.4g} m), "
+            f"inlier RMSE {1e3 * res.inlier_rmse_m:.3f} mm\ntimings: {times}"
+        )
 
     emit(args, payload, text)
     return 0

@@ -8,12 +8,16 @@ import argparse
 
 
 def register(sub, common) -> None:
-    p = sub.add_parser("report", parents=[common], help="rebuild report.html from a run or Monte-Carlo directory",
-                       description="Rebuild figures/*.png and report.html from the files of a run directory written by "
-                                   "`semslam demo`, `semslam slam` or `semslam evaluate`, of a `semslam montecarlo --out` "
-                                   "directory, or of a folder holding the Monte Carlos of several backends "
-                                   "(MC/ekf, MC/isam2, MC/batch: the position error over time of each backend, one "
-                                   "figure per scenario).")
+    p = sub.add_parser(
+        "report",
+        parents=[common],
+        help="rebuild report.html from a run or Monte-Carlo directory",
+        description="Rebuild figures/*.png and report.html from the files of a run directory written by "
+        "`semslam demo`, `semslam slam` or `semslam evaluate`, of a `semslam montecarlo --out` "
+        "directory, or of a folder holding the Monte Carlos of several backends "
+        "(MC/ekf, MC/isam2, MC/batch: the position error over time of each backend, one "
+        "figure per scenario).",
+    )
     p.add_argument("run_dir", metavar="RUN", help="run directory, Monte-Carlo directory or folder of Monte Carlos")
     p.set_defaults(func=run)
 

@@ -24,14 +24,22 @@ def register(subparsers, common) -> None:
     p.add_argument("--out", required=True, metavar="RUN", help="run directory to create (new, or an earlier run with "
                                                                 "--overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier semslam run in --out")
-    p.add_argument("--vehicle", help="vehicle description (TOML, or 'girona500'); default: the mission's, or BAG.vehicle.toml "
-                                     "beside the bag")
-    p.add_argument("--topics", help="topic map of a bag (TOML); default: BAG.topics.toml beside the bag, else the bag's "
-                                    "own evidence (a frame it cannot establish is an error, never a guess)")
+    p.add_argument(
+        "--vehicle",
+        help="vehicle description (TOML, or 'girona500'); default: the mission's, or BAG.vehicle.toml beside the bag",
+    )
+    p.add_argument(
+        "--topics",
+        help="topic map of a bag (TOML); default: BAG.topics.toml beside the bag, else the bag's "
+        "own evidence (a frame it cannot establish is an error, never a guess)",
+    )
     p.add_argument("--msg-dir", action="append", default=[], metavar="DIR", help="message definitions (bags)")
     add_config_options(p)
-    p.add_argument("--survey", metavar="FILE", help="landmarks known a priori: a survey CSV or an earlier run's map.json "
-                                                    "in the same world frame")
+    p.add_argument(
+        "--survey",
+        metavar="FILE",
+        help="landmarks known a priori: a survey CSV or an earlier run's map.json in the same world frame",
+    )
     p.add_argument("--mode", help="SLAM mode: dr, position, pose, pose+heading or all (default; or --config's)")
     p.add_argument("--seed", type=int, help="seed of recognition (default 0, or --config's)")
     p.add_argument("--backend", choices=BACKENDS,

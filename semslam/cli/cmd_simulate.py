@@ -68,7 +68,11 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.replace(fixes=dataclasses.replace(cfg.fixes, gps_count=args.gps, usbl_rate_hz=args.usbl_rate))
     interval = args.scan_interval
     if interval is None:
-        interval = max(DEFAULT_SCAN_INTERVAL_S, 1.0 / cfg.scanner.scan_rate_hz) if cfg.scanner.scan_rate_hz > 0 else DEFAULT_SCAN_INTERVAL_S
+        interval = (
+            max(DEFAULT_SCAN_INTERVAL_S, 1.0 / cfg.scanner.scan_rate_hz)
+            if cfg.scanner.scan_rate_hz > 0
+            else DEFAULT_SCAN_INTERVAL_S
+        )
     mission = simulate_dataset(cfg, seed=args.seed, with_scans=not args.no_scans, scan_interval_s=interval,
                                progress=not getattr(args, "json", False))
     if args.format == "mission":
@@ -85,11 +89,24 @@ def run(args: argparse.Namespace) -> int:
             atomic_write_text(tmp, topic_map_of(mission).to_toml())
     n_points = sum(s.n_points for s in mission.scans)
     payload = {
-        "directory": str(out), "format": args.format, "seed": args.seed, "duration_s": mission.duration_s, "n_scans": len(mission.scans),
-        "n_points": n_points, "n_objects": len(mission.objects),
-        "n_dvl": len(mission.dvl.stamp_s), "n_ahrs": len(mission.attitude.stamp_s), "n_depth": len(mission.depth.stamp_s),
+        "directory": str(out),
+        "format": args.format,
+        "seed": args.seed,
+        "duration_s": mission.duration_s,
+        "n_scans": len(mission.scans),
+        "n_points": n_points,
+        "n_objects": len(mission.objects),
+        "n_dvl": len(mission.dvl.stamp_s),
+        "n_ahrs": len(mission.attitude.stamp_s),
+        "n_depth": len(mission.depth.stamp_s),
     }
-    emit(args, payload, lambda: (
-        f"wrote {out}: {mission.duration_s:.1f} s, {len(mission.scans)} scans ({n_points} points), "
-        f"{len(mission.objects)} objects, DVL {payload['n_dvl']} / AHRS {payload['n_ahrs']} / depth {payload['n_depth']} samples"))
+    emit(
+        args,
+        payload,
+        lambda: (
+            f"wrote {out}: {mission.duration_s:.1f} s, {len(mission.scans)} scans ({n_points} points), "
+            f"{len(mission.objects)} objects, DVL {payload['n_dvl']} / AHRS {payload['n_ahrs']} / depth "
+            f"{payload['n_depth']} samples"
+        ),
+    )
     return 0

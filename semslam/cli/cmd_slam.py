@@ -19,7 +19,11 @@ def register(subparsers, common) -> None:
     p = subparsers.add_parser("slam", parents=[common], help="run the semantic EKF-SLAM on a mission",
                               description="Run the semantic EKF-SLAM on a dataset directory (or 'synthetic:SEED') "
                                           "and write trajectory.csv, landmarks.csv, updates.csv, metrics.json.")
-    p.add_argument("dataset", metavar="DATASET", help="dataset directory, or synthetic:SEED for the built-in analytic square dataset")
+    p.add_argument(
+        "dataset",
+        metavar="DATASET",
+        help="dataset directory, or synthetic:SEED for the built-in analytic square dataset",
+    )
     p.add_argument("--mode", choices=MODE_CHOICES, help="filter mode (default pose, or --config's [run] modes; all: "
                                                         "one sub-directory per mode)")
     p.add_argument("--out", required=True, help="run directory to write (new, or an earlier run with --overwrite)")
@@ -32,7 +36,9 @@ def register(subparsers, common) -> None:
     p.add_argument("--export", action="store_true",
                    help="also write TUM and KITTI trajectories, the map as JSON/CSV/PLY and run.mcap (ROS 2)")
     p.add_argument("--seed", type=int, help="seed of the truth-based detections (default 0, or --config's)")
-    p.add_argument("--survey", metavar="FILE", help="landmarks known a priori: a survey CSV or an earlier run's map.json")
+    p.add_argument(
+        "--survey", metavar="FILE", help="landmarks known a priori: a survey CSV or an earlier run's map.json"
+    )
     p.add_argument("--surveyed", action="append", default=[], metavar="OBJECT",
                    help="with truth-based detections: a mission object given to the run as a simulated survey (its "
                         "true pose plus the survey's error); repeatable")
@@ -40,10 +46,14 @@ def register(subparsers, common) -> None:
                    help="estimator: the EKF (default), or a GTSAM factor graph: isam2 (online smoothing) or batch")
     p.set_defaults(func=run)
 
-    q = subparsers.add_parser("montecarlo", parents=[common], help="seeded Monte-Carlo evaluation of the filter modes",
-                              description="Simulate N seeded missions, run each filter mode, report ATE and ANEES "
-                                          "(summary.json/.md, ANEES and error-over-time curves, report.html; "
-                                          "`semslam report` of a folder of several backends' Monte Carlos compares them).")
+    q = subparsers.add_parser(
+        "montecarlo",
+        parents=[common],
+        help="seeded Monte-Carlo evaluation of the filter modes",
+        description="Simulate N seeded missions, run each filter mode, report ATE and ANEES "
+        "(summary.json/.md, ANEES and error-over-time curves, report.html; "
+        "`semslam report` of a folder of several backends' Monte Carlos compares them).",
+    )
     q.add_argument("--runs", type=int, default=30, help="number of missions (default 30)")
     q.add_argument("--mode", choices=MODE_CHOICES, default="all", help="mode to run (default all)")
     q.add_argument("--yaw-bias-deg", type=float, default=0.0, help="constant AHRS yaw bias of the missions (degrees)")
@@ -140,9 +150,11 @@ def run(args: argparse.Namespace) -> int:
     def text() -> str:
         lines = [f"{'mode':<14}{'ATE (m)':>10}{'final (m)':>11}{'3-sigma (m)':>13}{'NEES':>8}{'landmarks':>11}"]
         for mode, mt in payload.items():
-            lines.append(f"{mode:<14}{mt.get('ate_rmse_m', float('nan')):>10.4f}{mt.get('final_position_error_m', float('nan')):>11.4f}"
-                         f"{mt.get('final_3sigma_m', float('nan')):>13.4f}{mt.get('nees_position_mean', float('nan')):>8.2f}"
-                         f"{mt['n_landmarks']:>11d}")
+            lines.append(
+                f"{mode:<14}{mt.get('ate_rmse_m', float('nan')):>10.4f}{mt.get('final_position_error_m', float('nan')):>11.4f}"
+                f"{mt.get('final_3sigma_m', float('nan')):>13.4f}{mt.get('nees_position_mean', float('nan')):>8.2f}"
+                f"{mt['n_landmarks']:>11d}"
+            )
         lines.append(f"written to {out}")
         return "\n".join(lines)
 
@@ -174,7 +186,9 @@ def _run_montecarlo(args: argparse.Namespace) -> int:
     overrides: dict = {}
     if args.launch_sigma is not None:
         if not (args.launch_sigma > 0 and args.launch_sigma < float("inf")):
-            raise InputError(f"The '--launch-sigma' option must be a positive number of metres. Got {args.launch_sigma!r} instead.")
+            raise InputError(
+                f"The '--launch-sigma' option must be a positive number of metres. Got {args.launch_sigma!r} instead."
+            )
         overrides["initial_position_sigma_m"] = float(args.launch_sigma)
     if args.no_smooth:
         overrides["smooth"] = False

@@ -1,7 +1,8 @@
 """A dive as semslam consumes it: the vehicle description, navigation logs, scans and optional ground truth.
 
 :class:`Dataset` is the data contract between every producer (the simulator, a dataset directory, a ROS bag,
-numpy arrays) and every consumer (:func:`semslam.pipeline.dataset_detection.detect_dataset`, :class:`semslam.slam.SlamSession`,
+numpy arrays) and every consumer (:func:`semslam.pipeline.dataset_detection.detect_dataset`,
+:class:`semslam.slam.SlamSession`,
 :func:`semslam.run.run_slam`). Build one in Python from arrays::
 
     from semslam.dataset import Dataset, DvlLog, AttitudeLog, DepthLog, VehicleDescription
@@ -101,7 +102,9 @@ class Dataset:
         try:
             return read_point_cloud(path, frame_id="scanner")
         except PcdError as exc:
-            raise DatasetError(f"Scan {scan_id} of the dataset in {str(self.directory)!r} cannot be read: {exc}") from None
+            raise DatasetError(
+                f"Scan {scan_id} of the dataset in {str(self.directory)!r} cannot be read: {exc}"
+            ) from None
 
     def point_stamps_s(self, record: ScanRecord, cloud: Any) -> np.ndarray | None:
         """Acquisition stamp (s) of every point of a scan: from a per-point time field (seconds from the

@@ -82,11 +82,16 @@ def write_dataset(mission: Dataset, out_dir: str | os.PathLike, *, overwrite: bo
         If ``out_dir`` exists (without ``overwrite``) or a scan cannot be written.
     """
     if not isinstance(mission, Dataset):
-        raise DatasetError(f"The 'mission' argument of write_dataset must be a Dataset. Got {type(mission).__name__} instead.")
+        raise DatasetError(
+            f"The 'mission' argument of write_dataset must be a Dataset. Got {type(mission).__name__} instead."
+        )
     out = Path(out_dir)
     # only a mission semslam's marker proves it wrote is replaced (semslam._outdir), never the mission's own source
     if out.exists() and not overwrite:
-        raise DatasetError(f"The 'out_dir' argument of write_dataset must not exist (use overwrite). Got existing {str(out)!r} instead.")
+        raise DatasetError(
+            f"The 'out_dir' argument of write_dataset must not exist (use overwrite). Got existing {str(out)!r} "
+            f"instead."
+        )
     with staged_output_dir(out, overwrite=True, kind="mission", option="out_dir",
                            inputs=(mission.directory,)) as tmp:
         _write_into(mission, tmp)
@@ -142,7 +147,9 @@ def _write_into(m: Dataset, d: Path) -> None:
     orows = []
     for o in m.objects:
         q = o.T_world_object.as_quat_wxyz()
-        orows.append([o.name, o.label, str(int(o.in_database)), *map(_num, o.T_world_object.translation_m), *map(_num, q)])
+        orows.append(
+            [o.name, o.label, str(int(o.in_database)), *map(_num, o.T_world_object.translation_m), *map(_num, q)]
+        )
     atomic_write_text(d / "ground_truth" / "objects.csv", _csv_text(_OBJECTS, orows))
 
 
@@ -164,7 +171,9 @@ def _read_rows(path: Path, header: tuple[str, ...], extra_prefix: str = "") -> t
         raise DatasetError(f"The mission file {str(path)!r} must start with the header {want}. Got {got} instead.")
     for i, r in enumerate(rows[1:], start=2):
         if len(r) != len(head):
-            raise DatasetError(f"The mission file {str(path)!r} line {i} must have {len(head)} columns. Got {len(r)} instead.")
+            raise DatasetError(
+                f"The mission file {str(path)!r} line {i} must have {len(head)} columns. Got {len(r)} instead."
+            )
     return list(head), rows[1:]
 
 
@@ -178,7 +187,9 @@ def _floats(path: Path, header: tuple[str, ...], extra_prefix: str = "") -> np.n
                 try:
                     float(v)
                 except ValueError:
-                    raise DatasetError(f"The mission file {str(path)!r} line {i} column {name!r} must be a number. Got {v!r} instead.") from None
+                    raise DatasetError(
+                        f"The mission file {str(path)!r} line {i} column {name!r} must be a number. Got {v!r} instead."
+                    ) from None
         raise
 
 
@@ -208,7 +219,10 @@ def read_dataset(directory: str | os.PathLike) -> Dataset:
                            f"semslam.dataset.write_dataset.")
     if not isinstance(meta, dict) or meta.get("format_version") not in SUPPORTED_VERSIONS:
         got = meta.get("format_version") if isinstance(meta, dict) else meta
-        raise DatasetError(f"The mission file {str(meta_path)!r} must have format_version in {SUPPORTED_VERSIONS}. Got {got!r} instead.")
+        raise DatasetError(
+            f"The mission file {str(meta_path)!r} must have format_version in {SUPPORTED_VERSIONS}. Got {got!r} "
+            f"instead."
+        )
     try:
         vehicle = read_vehicle_toml(d / "vehicle.toml")
         dv = _floats(d / "dvl.csv", _DVL, extra_prefix="range_")
@@ -221,12 +235,18 @@ def read_dataset(directory: str | os.PathLike) -> Dataset:
         truth = None
         files = meta.get("files") or {}
         if not isinstance(files, dict):
-            raise DatasetError(f"The mission file {str(meta_path)!r} key 'files' must be an object. Got {files!r} instead.")
+            raise DatasetError(
+                f"The mission file {str(meta_path)!r} key 'files' must be an object. Got {files!r} instead."
+            )
         # ground truth is optional (a recorded dive has none; only evaluation reads it): read when present
         if files.get("vehicle_truth") and (d / "ground_truth" / "vehicle.csv").exists():
             ve = _floats(d / "ground_truth" / "vehicle.csv", _VEHICLE)
-            truth = _log(d / "ground_truth" / "vehicle.csv", VehicleTruth, ve[:, 0], ve[:, 1:4], ve[:, 4:7], ve[:, 7:10])
-        objects = _read_objects(d / "ground_truth" / "objects.csv") if (d / "ground_truth" / "objects.csv").exists() else []
+            truth = _log(
+                d / "ground_truth" / "vehicle.csv", VehicleTruth, ve[:, 0], ve[:, 1:4], ve[:, 4:7], ve[:, 7:10]
+            )
+        objects = (
+            _read_objects(d / "ground_truth" / "objects.csv") if (d / "ground_truth" / "objects.csv").exists() else []
+        )
         fixes = _read_fixes(d / "position_fixes.csv") if (d / "position_fixes.csv").exists() else None
         origin = None
         if meta.get("geodetic_origin") is not None:

@@ -24,15 +24,19 @@ def check_stamps(name: str, value: Any, caller: str) -> np.ndarray:
     t = as_float_array(name, value, (None,), caller=caller, error=DatasetError, finite=False)
     bad = np.flatnonzero(~np.isfinite(t))
     if len(bad):
-        raise DatasetError(f"The {name!r} argument of {caller} must hold finite stamps (s). Got {float(t[bad[0]])!r} at "
-                           f"row {int(bad[0])} instead.")
+        raise DatasetError(
+            f"The {name!r} argument of {caller} must hold finite stamps (s). Got {float(t[bad[0]])!r} at "
+            f"row {int(bad[0])} instead."
+        )
     if len(t) > 1:
         step = np.diff(t)
         back = np.flatnonzero(step < 0)
         if len(back):
             k = int(back[0]) + 1
-            raise DatasetError(f"The {name!r} argument of {caller} must be sorted (non-decreasing). Got {float(t[k])!r} "
-                               f"after {float(t[k - 1])!r} at row {k} instead.")
+            raise DatasetError(
+                f"The {name!r} argument of {caller} must be sorted (non-decreasing). Got {float(t[k])!r} "
+                f"after {float(t[k - 1])!r} at row {k} instead."
+            )
     return t
 
 
@@ -176,7 +180,9 @@ class VehicleTruth:
         object.__setattr__(self, "stamp_s", t)
         object.__setattr__(self, "position_ned_m", _rows("position_ned_m", self.position_ned_m, n, 3, "VehicleTruth"))
         object.__setattr__(self, "rpy_rad", _rows("rpy_rad", self.rpy_rad, n, 3, "VehicleTruth"))
-        object.__setattr__(self, "velocity_body_mps", _rows("velocity_body_mps", self.velocity_body_mps, n, 3, "VehicleTruth"))
+        object.__setattr__(
+            self, "velocity_body_mps", _rows("velocity_body_mps", self.velocity_body_mps, n, 3, "VehicleTruth")
+        )
 
     def interpolate_position(self, stamp_s: Any) -> np.ndarray:
         """Linearly interpolated true position(s) at ``stamp_s`` (clamped to the log's span)."""
@@ -212,6 +218,9 @@ class ScanRecord:
     n_points: int = -1
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.start_stamp_s) and np.isfinite(self.end_stamp_s)) or self.end_stamp_s < self.start_stamp_s:
+        if (
+            not (np.isfinite(self.start_stamp_s) and np.isfinite(self.end_stamp_s))
+            or self.end_stamp_s < self.start_stamp_s
+        ):
             raise DatasetError(f"Scan {self.scan_id}: 'end_stamp_s' must be finite and >= 'start_stamp_s'. Got "
                                f"{self.start_stamp_s} and {self.end_stamp_s} instead.")

@@ -27,7 +27,8 @@ Topic map (TOML; ``semslam bag info BAG`` prints a suggestion)::
     depth = "enu"                    # for pose/odometry depth topics: "enu" (depth = -z) or "ned" (depth = z)
 
 Stamps are the messages' header stamps, or the bag's receive time where a header stamp is zero, in seconds from
-the whole second before the first message (``metadata["source"]["time_origin_ns"]`` gives it back). A twist with a non-finite velocity, or a vendor message whose beams are all invalid, is a DVL
+the whole second before the first message (``metadata["source"]["time_origin_ns"]`` gives it back). A twist with a
+non-finite velocity, or a vendor message whose beams are all invalid, is a DVL
 dropout.
 """
 
@@ -360,15 +361,24 @@ def export_bag(bag_path: str | os.PathLike, out_dir: str | os.PathLike, *, topic
         beams = None
         if nb and nb == len(vehicle.dvl.beam_azimuth_rad):
             beams = np.array([r[1][2] if r[1][2] is not None else np.full(nb, np.nan) for r in dvl]).reshape(-1, nb)
-        ds = Dataset(vehicle,
-                     DvlLog([r[0] for r in dvl], np.array([r[1][0] for r in dvl]).reshape(-1, 3), [r[1][1] for r in dvl],
-                            beams),
-                     AttitudeLog([r[0] for r in att], np.array([r[1] for r in att]).reshape(-1, 3)),
-                     DepthLog([r[0] for r in dep], [r[1] for r in dep]),
-                     scans=sorted(records, key=lambda r: r.start_stamp_s), directory=scratch,
-                     metadata={"source": {"bag": str(bag_path), "topics": asdict(tmap), "time_origin_ns": origin[0],
-                                          "T_vehicle_scanner_from": extrinsics or "vehicle file"}},
-                     fixes=fixes, geodetic_origin=geo)
+        ds = Dataset(
+            vehicle,
+            DvlLog([r[0] for r in dvl], np.array([r[1][0] for r in dvl]).reshape(-1, 3), [r[1][1] for r in dvl], beams),
+            AttitudeLog([r[0] for r in att], np.array([r[1] for r in att]).reshape(-1, 3)),
+            DepthLog([r[0] for r in dep], [r[1] for r in dep]),
+            scans=sorted(records, key=lambda r: r.start_stamp_s),
+            directory=scratch,
+            metadata={
+                "source": {
+                    "bag": str(bag_path),
+                    "topics": asdict(tmap),
+                    "time_origin_ns": origin[0],
+                    "T_vehicle_scanner_from": extrinsics or "vehicle file",
+                }
+            },
+            fixes=fixes,
+            geodetic_origin=geo,
+        )
         if not len(ds.attitude):
             raise BagError(f"Bag {str(bag_path)!r}: the attitude topic {tmap.attitude!r} has no usable message.")
         return write_dataset(ds, out, overwrite=overwrite)

@@ -27,8 +27,14 @@ float64[4] beam_ranges_m         # slant range of each beam (m), NaN without a r
 bool[4] beam_valid               # beam locked on the bottom
 float64 figure_of_merit          # vendor quality figure (m/s)
 """
-SEMSLAM_TOPICS = TopicMap(scans="/semslam/scans", attitude="/semslam/imu", dvl="/semslam/dvl", depth="/semslam/pressure",
-                          attitude_frame="enu", dvl_frame="frd")
+SEMSLAM_TOPICS = TopicMap(
+    scans="/semslam/scans",
+    attitude="/semslam/imu",
+    dvl="/semslam/dvl",
+    depth="/semslam/pressure",
+    attitude_frame="enu",
+    dvl_frame="frd",
+)
 _G = 9.80665
 
 

@@ -64,7 +64,9 @@ class TopicMap:
         if not isinstance(self.vehicle_frame_id, str) or not self.vehicle_frame_id.strip("/ "):
             raise DatasetError(f"The topic map's frames.vehicle_frame_id must be a frame name (a non-empty string). "
                                f"Got {self.vehicle_frame_id!r} instead.")
-        named = [(n, getattr(self, n)) for n in ("scans", "attitude", "dvl", "depth", "gps", "usbl") if getattr(self, n)]
+        named = [
+            (n, getattr(self, n)) for n in ("scans", "attitude", "dvl", "depth", "gps", "usbl") if getattr(self, n)
+        ]
         for i, (a, ta) in enumerate(named):  # one sensor per topic: a second one was silently dropped
             for b, tb in named[i + 1:]:
                 if ta == tb:
@@ -90,7 +92,10 @@ class TopicMap:
         if not isinstance(topics, dict) or not isinstance(frames, dict):
             raise DatasetError(f"The {source}'s [topics] and [frames] must be tables.")
         known = {"scans", "attitude", "dvl", "depth"}
-        for table, keys in (("topics", known | {"gps", "usbl"}), ("frames", (known - {"scans"}) | {"vehicle_frame_id"})):
+        for table, keys in (
+            ("topics", known | {"gps", "usbl"}),
+            ("frames", (known - {"scans"}) | {"vehicle_frame_id"}),
+        ):
             extra = sorted(set(d.get(table, {})) - keys)
             if extra:
                 raise DatasetError(f"The {source} has unknown key(s) {[f'{table}.{k}' for k in extra]}. Expected "

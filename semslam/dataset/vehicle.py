@@ -158,7 +158,9 @@ class VehicleDescription:
         _unknown(d, known, source, "")
         ver = d.get("format_version", VEHICLE_FORMAT_VERSION)
         if ver != VEHICLE_FORMAT_VERSION or isinstance(ver, bool):
-            raise DatasetError(f"The {source} key 'format_version' must be {VEHICLE_FORMAT_VERSION}. Got {ver!r} instead.")
+            raise DatasetError(
+                f"The {source} key 'format_version' must be {VEHICLE_FORMAT_VERSION}. Got {ver!r} instead."
+            )
         name = d.get("name", "vehicle")
         if not isinstance(name, str):
             raise DatasetError(f"The {source} key 'name' must be a string. Got {name!r} instead.")
@@ -215,7 +217,9 @@ def _value(value: Any, default: Any, key: str, source: str):
 
     if isinstance(default, tuple):
         if not isinstance(value, list) or (len(default) and len(value) != len(default) and "azimuth" not in key):
-            raise DatasetError(f"The {source} key {key!r} must be a list of {len(default)} numbers. Got {value!r} instead.")
+            raise DatasetError(
+                f"The {source} key {key!r} must be a list of {len(default)} numbers. Got {value!r} instead."
+            )
         if not value:
             raise DatasetError(f"The {source} key {key!r} must not be empty.")
         return tuple(num(v) for v in value)

@@ -69,7 +69,9 @@ def compute_esf(
         raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must fit in float32. Got values beyond 3.4e38.")
     local, vox, lut, maxd = K.esf_prepare(pts32)
     if not maxd > 0:
-        raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must hold distinct points. Got {n} identical points.")
+        raise DescriptorError(
+            f"The 'points_xyz_m' argument of {caller} must hold distinct points. Got {n} identical points."
+        )
     draw = _sampler(sampler, seed, n, caller)
     out_i, out_f, end = _evaluated_samples(local, vox, lut, draw, n_samples, caller)
     return K.esf_histogram(out_i, out_f, end)

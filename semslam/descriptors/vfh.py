@@ -99,7 +99,9 @@ def _checked_inputs(
     vp = as_float_array("viewpoint_xyz_m", viewpoint_xyz_m, (3,), caller=caller, error=DescriptorError)
     check_choice("variant", variant, VFH_VARIANTS, caller=caller)
     if len(pts) < 2:
-        raise DescriptorError(f"The 'points_xyz_m' argument of {caller} must have at least 2 points. Got {len(pts)} instead.")
+        raise DescriptorError(
+            f"The 'points_xyz_m' argument of {caller} must have at least 2 points. Got {len(pts)} instead."
+        )
     valid = np.isfinite(nrm).all(axis=1)
     n = int(valid.sum())
     if n < 2:

@@ -123,7 +123,9 @@ def leave_one_out(db: ViewDatabase, *, descriptor: str = "esf", classifier: str 
         A bar, or ``progress(n_done, n_folds)`` after every fitted fold (:mod:`semslam._progress`).
     """
     if not isinstance(db, ViewDatabase):
-        raise RecognitionError(f"The 'db' argument of leave_one_out must be a ViewDatabase. Got {type(db).__name__} instead.")
+        raise RecognitionError(
+            f"The 'db' argument of leave_one_out must be a ViewDatabase. Got {type(db).__name__} instead."
+        )
     check_choice("descriptor", descriptor, DESCRIPTORS, caller="leave_one_out")
     if isinstance(classifier, str):
         check_choice("classifier", classifier, CLASSIFIERS, caller="leave_one_out")

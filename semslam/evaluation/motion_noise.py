@@ -62,7 +62,9 @@ def measure_unaided_motion(dvl_logs: DvlLog | list[DvlLog], *, noise_sigma_mps: 
         raise SlamError(f"The 'dvl_logs' argument of measure_unaided_motion must be a DvlLog or a non-empty list "
                         f"of DvlLog. Got {type(dvl_logs).__name__} instead.")
     if not 0.0 < float(quantile) < 1.0:
-        raise SlamError(f"The 'quantile' argument of measure_unaided_motion must be in (0, 1). Got {quantile!r} instead.")
+        raise SlamError(
+            f"The 'quantile' argument of measure_unaided_motion must be in (0, 1). Got {quantile!r} instead."
+        )
     lags = tuple(float(x) for x in lags_s)
     if not lags or min(lags) <= 0:
         raise SlamError(f"The 'lags_s' argument of measure_unaided_motion must be positive lags (s). Got {lags_s!r} "

@@ -69,8 +69,11 @@ def evaluate_run(result: SlamResult, dataset: Dataset, symmetries: dict[str, Sym
             truth_pos = truth_pos - offset
             objects = [ObjectTruth(o.name, o.label, RigidTransform.from_rotation_translation(
                 o.T_world_object.rotation, o.T_world_object.translation_m - offset), o.in_database) for o in objects]
-            metrics["evaluation_frame"] = {"frame": "local", "alignment": "translation putting the true start at the "
-                                           "estimated start (the local frame's origin)", "offset_ned_m": offset.tolist()}
+            metrics["evaluation_frame"] = {
+                "frame": "local",
+                "alignment": "translation putting the true start at the estimated start (the local frame's origin)",
+                "offset_ned_m": offset.tolist(),
+            }
         else:
             metrics["evaluation_frame"] = {"frame": "world", "alignment": "none"}
         metrics.update(trajectory_metrics(result.position_ned_m, truth_pos, result.position_cov_m2))
@@ -90,7 +93,9 @@ def evaluate_run(result: SlamResult, dataset: Dataset, symmetries: dict[str, Sym
         oe = np.array([lm.orientation_error_rad for lm in landmarks])
         metrics["landmark_position_error_mean_m"] = float(np.nanmean(pe)) if np.isfinite(pe).any() else None
         metrics["landmark_position_error_max_m"] = float(np.nanmax(pe)) if np.isfinite(pe).any() else None
-        metrics["landmark_orientation_error_mean_deg"] = float(np.degrees(np.nanmean(oe))) if np.isfinite(oe).any() else None
+        metrics["landmark_orientation_error_mean_deg"] = (
+            float(np.degrees(np.nanmean(oe))) if np.isfinite(oe).any() else None
+        )
         metrics["n_objects_mapped"] = len({lm.matched_object for lm in landmarks if lm.matched_object})
     if "smoother" in metrics and result.smoothed_position_ned_m is not None and truth_pos is not None and len(stamps):
         metrics["smoother"] = dict(metrics["smoother"])
@@ -106,7 +111,9 @@ def align_4dof(est_m: np.ndarray, truth_m: np.ndarray) -> tuple[float, np.ndarra
     est, tru = np.asarray(est_m, dtype=float), np.asarray(truth_m, dtype=float)
     me, mt = est.mean(axis=0), tru.mean(axis=0)
     a, b = est[:, :2] - me[:2], tru[:, :2] - mt[:2]
-    yaw = float(np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])))
+    yaw = float(
+        np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    )
     c, s = np.cos(yaw), np.sin(yaw)
     R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return yaw, mt - R @ me

@@ -90,8 +90,14 @@ class MonteCarloResult:
                         f"{lm(s, 'landmark_nees_pose')} | {_smoothed_cells(s)} |")
         pairs = [(a, b, v) for a in self.modes for b, v in self.summary[a].get("paired", {}).items()]
         if pairs:
-            rows += ["", ("| paired, same missions | ATE difference mean +- s.e. (m) | runs not worse | "
-                          "smoothed: difference mean +- s.e. (m) | smoothed: runs not worse |"), "|---|---|---|---|---|"]
+            rows += [
+                "",
+                (
+                    "| paired, same missions | ATE difference mean +- s.e. (m) | runs not worse | "
+                    "smoothed: difference mean +- s.e. (m) | smoothed: runs not worse |"
+                ),
+                "|---|---|---|---|---|",
+            ]
             for a, b, v in pairs:
                 sm = v.get("smoothed")
                 rows.append(f"| {a} - {b} | {v['ate_diff_mean_m']:+.5f} +- {v['ate_diff_se_m']:.5f} | "
@@ -111,8 +117,14 @@ def _montecarlo_run(i: int, *, opts: dict) -> dict:
     """Run ``i`` of :func:`run_montecarlo` (one mission, every mode): per mode the per-epoch NEES (online, smoothed),
     3-sigma bound, error, relative stamps and the metrics. A Dask task: small arguments, small result."""
     seed = opts["seed"] + i
-    mission = make_dataset(seed, yaw_bias_rad=opts["yaw_bias_rad"], source=opts["source"], loops=opts["loops"],
-                           yaw_bias_walk_rad_per_sqrt_s=opts["yaw_bias_walk_rad_per_sqrt_s"], white_dvl=opts["white_dvl"])
+    mission = make_dataset(
+        seed,
+        yaw_bias_rad=opts["yaw_bias_rad"],
+        source=opts["source"],
+        loops=opts["loops"],
+        yaw_bias_walk_rad_per_sqrt_s=opts["yaw_bias_walk_rad_per_sqrt_s"],
+        white_dvl=opts["white_dvl"],
+    )
     cfg = SlamConfig().updated(**opts["config_overrides"])
     out = {}
     for mode in opts["modes"]:
@@ -236,14 +248,20 @@ def _mode_summary(N: np.ndarray, S3: np.ndarray, E: np.ndarray, met: list, nees_
     a = anees(N, 3)
     ate = np.array([m["ate_rmse_m"] for m in met])
     summary = {
-        "ate_rmse_mean_m": float(ate.mean()), "ate_rmse_median_m": float(np.median(ate)),
+        "ate_rmse_mean_m": float(ate.mean()),
+        "ate_rmse_median_m": float(np.median(ate)),
         "ate_rmse_max_m": float(ate.max()),
         "final_error_mean_m": float(E[:, -1].mean()),
-        "final_3sigma_mean_m": float(S3[:, -1].mean()), "max_3sigma_mean_m": float(S3.max(axis=1).mean()),
-        "anees_mean": a["anees_mean"], "band": list(chi2_band(3, n_runs)), "fraction_in_band": a["fraction_in_band"],
+        "final_3sigma_mean_m": float(S3[:, -1].mean()),
+        "max_3sigma_mean_m": float(S3.max(axis=1).mean()),
+        "anees_mean": a["anees_mean"],
+        "band": list(chi2_band(3, n_runs)),
+        "fraction_in_band": a["fraction_in_band"],
         "n_landmarks_mean": float(np.mean([m["n_landmarks"] for m in met])),
         "cross_class_updates": int(sum(m["cross_class_updates"] for m in met)),
-        "sigma3_at_thirds_mean_m": [float(S3[:, min(K - 1, int(round(f * (K - 1))))].mean()) for f in (1 / 3, 2 / 3, 1.0)],
+        "sigma3_at_thirds_mean_m": [
+            float(S3[:, min(K - 1, int(round(f * (K - 1))))].mean()) for f in (1 / 3, 2 / 3, 1.0)
+        ],
         "landmark_nees_position": _landmark_anees([m.get("landmark_nees_position", []) for m in met], 3),
         "landmark_nees_pose": _landmark_anees([m.get("landmark_nees_pose", []) for m in met], 6),
         "dvl_rejected_mean": float(np.mean([m.get("dvl_rejected", 0) for m in met])),
@@ -260,10 +278,13 @@ def _dr_ratios(summary: dict, modes: tuple) -> None:
     """Each mode's DR/mode ATE ratio (filtered, and smoothed when both have one), when DR ran."""
     if "dr" in summary:
         for mode in modes:
-            summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(summary[mode]["ate_rmse_mean_m"], 1e-12)
+            summary[mode]["dr_over_mode_ate"] = summary["dr"]["ate_rmse_mean_m"] / max(
+                summary[mode]["ate_rmse_mean_m"], 1e-12
+            )
             if "smoothed" in summary[mode] and "smoothed" in summary["dr"]:
-                summary[mode]["smoothed"]["dr_over_mode_ate"] = (summary["dr"]["smoothed"]["ate_rmse_mean_m"]
-                                                                 / max(summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12))
+                summary[mode]["smoothed"]["dr_over_mode_ate"] = summary["dr"]["smoothed"]["ate_rmse_mean_m"] / max(
+                    summary[mode]["smoothed"]["ate_rmse_mean_m"], 1e-12
+                )
 
 
 #: mode -> the mode it is meant to improve on (paired comparison on the same missions)

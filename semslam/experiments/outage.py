@@ -118,12 +118,17 @@ def run_outage_montecarlo(n_runs: int, *, scenarios=("first_half", "middle", "la
 
 def outage_table(rows: list[OutageRow]) -> str:
     """Markdown table of :func:`run_outage_montecarlo`'s rows."""
-    out = ["| outage | mode | truth yaw bias | ATE (m) | DR ATE (m) | ANEES | 95 % band | epochs in band | final err (m) | "
-           "final 3-sigma (m) | runs final inside 3-sigma | runs worse than DR beyond 1-sigma |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = [
+        "| outage | mode | truth yaw bias | ATE (m) | DR ATE (m) | ANEES | 95 % band | epochs in band | final err (m) "
+        "| "
+        "final 3-sigma (m) | runs final inside 3-sigma | runs worse than DR beyond 1-sigma |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        out.append(f"| {r.scenario} | {r.mode} | {'from the prior' if r.yaw_bias_from_prior else 'none'} | "
-                   f"{r.ate_mean_m:.3f} | {r.dr_ate_mean_m:.3f} | {r.anees_mean:.2f} | "
-                   f"[{r.band[0]:.2f}, {r.band[1]:.2f}] | {100 * r.fraction_in_band:.0f} % | {r.final_error_mean_m:.3f} | "
-                   f"{r.final_3sigma_mean_m:.3f} | {100 * r.final_inside_3sigma:.0f} % | {r.worse_than_dr_beyond_sigma} |")
+        out.append(
+            f"| {r.scenario} | {r.mode} | {'from the prior' if r.yaw_bias_from_prior else 'none'} | "
+            f"{r.ate_mean_m:.3f} | {r.dr_ate_mean_m:.3f} | {r.anees_mean:.2f} | "
+            f"[{r.band[0]:.2f}, {r.band[1]:.2f}] | {100 * r.fraction_in_band:.0f} % | {r.final_error_mean_m:.3f} | "
+            f"{r.final_3sigma_mean_m:.3f} | {100 * r.final_inside_3sigma:.0f} % | {r.worse_than_dr_beyond_sigma} |"
+        )
     return "\n".join(out)

@@ -31,7 +31,9 @@ def _range(name: str, v) -> tuple[float, float]:
     except (TypeError, ValueError):
         raise InputError(f"The {name!r} argument of corrupt_detections must be a pair (low, high). Got {v!r} instead.")
     if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi):
-        raise InputError(f"The {name!r} argument of corrupt_detections must satisfy 0 <= low <= high. Got {v!r} instead.")
+        raise InputError(
+            f"The {name!r} argument of corrupt_detections must satisfy 0 <= low <= high. Got {v!r} instead."
+        )
     return lo, hi
 
 
@@ -48,9 +50,13 @@ def corrupt_detections(detections: dict[int, list[Detection]], *, fraction: floa
     corrupted detections. The input is not modified.
     """
     if kind not in OUTLIER_KINDS:
-        raise InputError(f"The 'kind' argument of corrupt_detections must be one of {OUTLIER_KINDS}. Got {kind!r} instead.")
+        raise InputError(
+            f"The 'kind' argument of corrupt_detections must be one of {OUTLIER_KINDS}. Got {kind!r} instead."
+        )
     if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0.0 <= fraction <= 1.0:
-        raise InputError(f"The 'fraction' argument of corrupt_detections must be a number in [0, 1]. Got {fraction!r} instead.")
+        raise InputError(
+            f"The 'fraction' argument of corrupt_detections must be a number in [0, 1]. Got {fraction!r} instead."
+        )
     t_lo, t_hi = _range("translation_m", translation_m)
     r_lo, r_hi = np.radians(_range("rotation_deg", rotation_deg))
     rng = as_rng(seed, caller="corrupt_detections")
@@ -74,8 +80,11 @@ def corrupt_detections(detections: dict[int, list[Detection]], *, fraction: floa
             dt = rng.uniform(t_lo, t_hi) * u / np.linalg.norm(u)
             dR = kern.so3_exp(rng.uniform(r_lo, r_hi) * a / np.linalg.norm(a))
             T = d.T_sensor_object
-            new = replace(d, T_sensor_object=RigidTransform.from_rotation_translation(dR @ T.rotation, T.translation_m + dt),
-                          extras={**d.extras, "outlier": what})
+            new = replace(
+                d,
+                T_sensor_object=RigidTransform.from_rotation_translation(dR @ T.rotation, T.translation_m + dt),
+                extras={**d.extras, "outlier": what},
+            )
         out[sid][k] = new
         record.append((sid, k, what))
     return out, record

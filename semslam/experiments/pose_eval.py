@@ -94,7 +94,9 @@ def error_vector(est, T_true: np.ndarray, symmetry: Symmetry) -> np.ndarray:
     """(dx dy dz, d roll pitch yaw) of the estimate against the closest equivalent truth (see :func:`pose_errors`)."""
     Te = est.T_scanner_object.matrix
     R_eq = _closest_equivalent(Te[:3, :3], T_true[:3, :3], symmetry)
-    return np.concatenate([Te[:3, 3] - T_true[:3, 3], wrap_angle(rpy_from_rotation(Te[:3, :3]) - rpy_from_rotation(R_eq))])
+    return np.concatenate(
+        [Te[:3, 3] - T_true[:3, 3], wrap_angle(rpy_from_rotation(Te[:3, :3]) - rpy_from_rotation(R_eq))]
+    )
 
 
 def _closest_equivalent(Re: np.ndarray, Rt: np.ndarray, symmetry: Symmetry) -> np.ndarray:
@@ -159,7 +161,9 @@ def summary_table(rows: list[EvalRow], title: str = "") -> str:
         lines.append(
             f"| {lab} | {len(rs)} | {np.degrees(np.median([r.rot_rad for r in rs])):.2f} | "
             f"{1e3 * np.median([r.trans_m for r in rs]):.2f} | {100 * np.mean([r.success for r in rs]):.1f} | "
-            f"{np.mean(nees) if len(nees) else float('nan'):.2f} | {np.median(nees) if len(nees) else float('nan'):.2f} | "
+            f"{np.mean(nees) if len(nees) else float('nan'):.2f} | "
+            f"{np.median(nees) if len(nees) else float('nan'):.2f} | "
             f"{sum(wrong)} | {sum(w and f for w, f in zip(wrong, flagged))} | "
-            f"{sum((not w) and f for w, f in zip(wrong, flagged))} | {np.median([r.ms for r in rs]):.1f} |")
+            f"{sum((not w) and f for w, f in zip(wrong, flagged))} | {np.median([r.ms for r in rs]):.1f} |"
+        )
     return "\n".join(lines)

@@ -33,7 +33,9 @@ def read_detections_jsonl(path: str | Path) -> dict[int, list[Detection]]:
         except SemslamError as exc:
             raise InputError(f"Line {n} of {str(path)!r}: {exc}") from None
         if not np.isfinite(d.stamp_s):
-            raise InputError(f"Line {n} of {str(path)!r}: a detection needs a finite 'stamp_s'. Got {d.stamp_s} instead.")
+            raise InputError(
+                f"Line {n} of {str(path)!r}: a detection needs a finite 'stamp_s'. Got {d.stamp_s} instead."
+            )
         out.setdefault(d.scan_id, []).append(d)
     return out
 

@@ -140,10 +140,14 @@ class AttachedConfig:
                      "min_extent_share", "min_area_share", "min_explained_share"):
             check_positive(name, getattr(self, name), caller=c)
         if not self.max_angle_deg < 90:
-            raise InputError(f"The 'max_angle_deg' argument of {c} must be in (0, 90). Got {self.max_angle_deg!r} instead.")
+            raise InputError(
+                f"The 'max_angle_deg' argument of {c} must be in (0, 90). Got {self.max_angle_deg!r} instead."
+            )
         for name in ("min_extent_share", "min_explained_share"):
             if not getattr(self, name) <= 1:
-                raise InputError(f"The '{name}' argument of {c} must be in (0, 1]. Got {getattr(self, name)!r} instead.")
+                raise InputError(
+                    f"The '{name}' argument of {c} must be in (0, 1]. Got {getattr(self, name)!r} instead."
+                )
         try:
             lo, hi = (float(v) for v in self.radius_range_m)
         except (TypeError, ValueError):
@@ -158,7 +162,9 @@ class AttachedConfig:
         check_int("min_structure_points", self.min_structure_points, caller=c, minimum=3)
         check_int("max_clusters", self.max_clusters, caller=c, minimum=1)
         if not isinstance(self.include_far, bool):
-            raise InputError(f"The 'include_far' argument of {c} must be True or False. Got {self.include_far!r} instead.")
+            raise InputError(
+                f"The 'include_far' argument of {c} must be True or False. Got {self.include_far!r} instead."
+            )
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)

@@ -158,7 +158,9 @@ class PipelineConfig:
 
             up = as_float_array("up_scanner", self.up_scanner, (3,), caller=c)
             if not np.linalg.norm(up) > 1e-9:
-                raise InputError(f"The 'up_scanner' argument of {c} must be a non-zero 3-vector. Got {up.tolist()} instead.")
+                raise InputError(
+                    f"The 'up_scanner' argument of {c} must be a non-zero 3-vector. Got {up.tolist()} instead."
+                )
             object.__setattr__(self, "up_scanner", tuple(float(v) for v in up))
         check_positive("ambiguous_rotation_variance_rad2", self.ambiguous_rotation_variance_rad2, caller=c)
         check_choice("descriptor", self.descriptor, ("esf", "vfh", "esf+vfh"), caller=c)
@@ -177,7 +179,9 @@ class PipelineConfig:
             raise InputError(f"The 'segmentation' argument of {c} must be a SegmentationConfig. "
                              f"Got {type(self.segmentation).__name__} instead.")
         if not isinstance(self.pose, PoseConfig):
-            raise InputError(f"The 'pose' argument of {c} must be a PoseConfig. Got {type(self.pose).__name__} instead.")
+            raise InputError(
+                f"The 'pose' argument of {c} must be a PoseConfig. Got {type(self.pose).__name__} instead."
+            )
 
     def to_dict(self) -> dict:
         d = asdict(self)

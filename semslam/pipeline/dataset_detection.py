@@ -120,7 +120,9 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         ``on_scan(record, cloud, result)`` after each scan (e.g. scoring against ground truth, figures).
     """
     if not isinstance(dataset, Dataset):
-        raise InputError(f"The 'dataset' argument of detect_dataset must be a Dataset. Got {type(dataset).__name__} instead.")
+        raise InputError(
+            f"The 'dataset' argument of detect_dataset must be a Dataset. Got {type(dataset).__name__} instead."
+        )
     if not isinstance(recognizer, ScanRecognizer):
         raise InputError(f"The 'recognizer' argument of detect_dataset must be a ScanRecognizer. Got "
                          f"{type(recognizer).__name__} instead.")

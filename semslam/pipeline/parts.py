@@ -14,7 +14,8 @@ and is kept only if, in addition, **every part** is on the class's surface under
 points within ``PoseConfig.icp_max_correspondence_m`` of the model at least ``min_part_fitness``): a rock or a
 pipe offcut beside an object does not fit the object's model, so it cannot ride along on a union whose overall
 fitness the object's own points carry. With ``PartsConfig(scene_visibility=True)`` a union's visibility cost is
-verified against the whole scan, not the union's points. Unions that pass are kept greedily (most points first, then the better
+verified against the whole scan, not the union's points. Unions that pass are kept greedily (most points first, then
+the better
 fitness), each cluster in at most one.
 
 The parts of a kept union get the union's class and its one :class:`~semslam.detection.Detection` (with
@@ -66,7 +67,8 @@ class PartsConfig:
         Share of every part's points that must lie within ``PoseConfig.icp_max_correspondence_m`` of the model
         under the union's pose (the union as a whole must pass ``PipelineConfig.verify_min_fitness``). Default
         0.8: on the catalogue benchmark (seed 0) the parts of the accepted unions scored 0.87-1.0 (a handwheel
-        fragment 0.871), and a rock beside an object scores below 0.5 (``tests/pipeline/test_pipeline_parts.py``); None =
+        fragment 0.871), and a rock beside an object scores below 0.5 (``tests/pipeline/test_pipeline_parts.py``);
+        None =
         ``verify_min_fitness``.
     max_unions : int
         Unions evaluated per scan at most (nearest gaps first), a bound on the time. Default 24.

@@ -106,7 +106,9 @@ def pose_verdict(coarse_ok: bool, fitness: float, rmse_m: float, visibility: flo
     i.e. the grid search) the score margin >= ``min_score_margin``. *Ambiguous*: aligned but not reliable because
     another, non-equivalent orientation scores within the margin."""
     seen = bool(np.isfinite(visibility))
-    aligned = bool(fitness >= cfg.min_fitness and rmse_m <= cfg.max_rmse_m and not (seen and visibility > cfg.max_visibility))
+    aligned = bool(
+        fitness >= cfg.min_fitness and rmse_m <= cfg.max_rmse_m and not (seen and visibility > cfg.max_visibility)
+    )
     reliable = bool(coarse_ok and aligned and (not seen or score_margin >= cfg.min_score_margin))
     ambiguous = bool(not reliable and aligned and np.isfinite(score_margin) and score_margin < cfg.min_score_margin)
     return reliable, ambiguous
@@ -204,7 +206,9 @@ def _checked_symmetry(symmetry: Any) -> Symmetry:
     return sym
 
 
-def _checked_cluster(cluster_points_scanner: Any, viewpoint_xyz_m: Any, cfg: PoseConfig) -> tuple[np.ndarray, np.ndarray]:
+def _checked_cluster(
+    cluster_points_scanner: Any, viewpoint_xyz_m: Any, cfg: PoseConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """The cluster points (N, 3) and the scanner origin (3,), both in the scanner frame; a RegistrationError
     when the cluster has fewer than ``cfg.min_points`` points."""
     if isinstance(cluster_points_scanner, PointCloud):
@@ -371,7 +375,9 @@ def _coarse_ransac(cluster, vp, model: PoseModel, cfg: PoseConfig, seed):
                          "coarse_method='ransac'.")
     down = voxel_downsample(cluster, cfg.voxel_m)
     if len(down) < 3:
-        raise RegistrationError(f"The cluster given to {_CALLER} has {len(down)} voxels of {cfg.voxel_m} m; at least 3 are needed.")
+        raise RegistrationError(
+            f"The cluster given to {_CALLER} has {len(down)} voxels of {cfg.voxel_m} m; at least 3 are needed."
+        )
     nrm = estimate_normals(down, radius_m=cfg.normal_radius_m, viewpoint_xyz_m=vp).normals_xyz
     feats = compute_fpfh(down, nrm, radius_m=cfg.feature_radius_m)
     t2 = time.perf_counter()

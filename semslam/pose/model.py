@@ -155,7 +155,9 @@ class PoseConfig:
         check_choice("icp_backend", self.icp_backend, ("field", "small_gicp"), caller=c)
         for name in ("inlier_fraction", "min_fitness"):
             if not 0 <= float(getattr(self, name)) <= 1:
-                raise InputError(f"The {name!r} argument of {c} must be in [0, 1]. Got {getattr(self, name)!r} instead.")
+                raise InputError(
+                    f"The {name!r} argument of {c} must be in [0, 1]. Got {getattr(self, name)!r} instead."
+                )
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -234,7 +236,9 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
 
     cfg = config or PoseConfig()
     if not isinstance(cfg, PoseConfig):
-        raise InputError(f"The 'config' argument of prepare_pose_model must be a PoseConfig. Got {type(cfg).__name__} instead.")
+        raise InputError(
+            f"The 'config' argument of prepare_pose_model must be a PoseConfig. Got {type(cfg).__name__} instead."
+        )
     views = _as_views(model)
     pts = np.vstack([v[0] for v in views])
     down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m)
@@ -253,7 +257,9 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         cloud = small_gicp.PointCloud(icp_pts)
         small_gicp.estimate_normals(cloud, num_neighbors=cfg.model_normals_k)
         normals = np.ascontiguousarray(cloud.normals()[:, :3])
-    vis_pts, vis_nrm = _oriented_samples(views, cfg.visibility_voxel_m, max(cfg.normal_radius_m, 1.5 * cfg.visibility_voxel_m))
+    vis_pts, vis_nrm = _oriented_samples(
+        views, cfg.visibility_voxel_m, max(cfg.normal_radius_m, 1.5 * cfg.visibility_voxel_m)
+    )
     ok = np.isfinite(vis_nrm).all(axis=1)
     vis_pts, vis_nrm = vis_pts[ok], vis_nrm[ok]
     if len(views) > 1:  # fused views overlap: one sample per voxel (normal of the nearest view sample)
@@ -263,13 +269,24 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
     hierarchy = None
     if 0 < cfg.n_coarse_rotations < cfg.n_rotations and cfg.n_coarse_keep > 0:
         hierarchy = _rotation_hierarchy(cfg.n_rotations, cfg.n_coarse_rotations)
-    return PoseModel(pts, down, feats, cKDTree(down), ftree, target, normals, cfg,
-                     distance_field=DistanceField.build_cached(icp_pts, cell_m=cfg.field_cell_m),
-                     visibility_points=np.ascontiguousarray(vis_pts), visibility_normals=np.ascontiguousarray(vis_nrm),
-                     rotations=rotations, radius_m=float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1)))),
-                     rotation_hierarchy=hierarchy,
-                     radius_grid=RadiusGrid.build(target.points_xyz_m, max(cfg.fit_tau_m, cfg.icp_max_correspondence_m)),
-                     view_centroids=ViewCentroids.build_cached(vis_pts, vis_nrm) if len(vis_pts) else None)
+    return PoseModel(
+        pts,
+        down,
+        feats,
+        cKDTree(down),
+        ftree,
+        target,
+        normals,
+        cfg,
+        distance_field=DistanceField.build_cached(icp_pts, cell_m=cfg.field_cell_m),
+        visibility_points=np.ascontiguousarray(vis_pts),
+        visibility_normals=np.ascontiguousarray(vis_nrm),
+        rotations=rotations,
+        radius_m=float(np.sqrt(np.mean(np.sum(pts**2, axis=1)))),
+        rotation_hierarchy=hierarchy,
+        radius_grid=RadiusGrid.build(target.points_xyz_m, max(cfg.fit_tau_m, cfg.icp_max_correspondence_m)),
+        view_centroids=ViewCentroids.build_cached(vis_pts, vis_nrm) if len(vis_pts) else None,
+    )
 
 
 def _nearest(model: PoseModel, points: np.ndarray, bound_m: float) -> tuple[np.ndarray, np.ndarray]:

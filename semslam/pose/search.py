@@ -129,7 +129,8 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     ``view_centroids`` (:class:`ViewCentroids`), also onto the centroids of the model surface seen from the
     scanner under the orientation, where these are more than ``start_separation_m`` from the first; each start
     is aligned by translation-only steps on the distance field (one per entry of ``truncations_m``, the first
-    3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The visible-surface starts matter for parts whose origin (bounding-box
+    3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The
+    visible-surface starts matter for parts whose origin (bounding-box
     centre) is far from their surface, e.g. an L-shaped valve (ring and lever): there the radius rule starts
     ~10 cm off.
 

@@ -162,10 +162,21 @@ class RangeImage:
         ``unseen_is_contradiction`` False (an image of the scene, :meth:`build_scene`), model points where the
         scanner saw nothing are left out, and those behind what it saw are hidden (behind an object, when the image
         has ``occluder_min``), not contradictions."""
-        return K.visibility_cost(np.ascontiguousarray(Rs), np.ascontiguousarray(ts), model_pts, model_nrm,
-                                 self.viewpoint, self.F, self.u0, self.v0, 1.0 / self.cell, self.range_min, float(tol_m),
-                                 bool(unseen_is_contradiction),
-                                 self.range_min if self.occluder_min is None else self.occluder_min)
+        return K.visibility_cost(
+            np.ascontiguousarray(Rs),
+            np.ascontiguousarray(ts),
+            model_pts,
+            model_nrm,
+            self.viewpoint,
+            self.F,
+            self.u0,
+            self.v0,
+            1.0 / self.cell,
+            self.range_min,
+            float(tol_m),
+            bool(unseen_is_contradiction),
+            self.range_min if self.occluder_min is None else self.occluder_min,
+        )
 
 
 @dataclass(frozen=True, eq=False)

@@ -61,7 +61,8 @@ def build_database(views: Sequence[tuple[str, str, PointCloud]], classes: Mappin
         :meth:`ViewDatabase.describe` applies it to queries: the segmentation's default grid, so that
         laser clusters and Kinect views have the same density. None keeps the raw views (the papers).
         ``"auto"``: 0.9 x the views' measured point spacing. The resolved lengths are recorded in
-        ``params`` (floats, with ``spacing_m``, ``vfh_scale``, ``auto`` and ``auto_rule``), so queries are described the same way;
+        ``params`` (floats, with ``spacing_m``, ``vfh_scale``, ``auto`` and ``auto_rule``), so queries are described
+        the same way;
         queries must then come at the views' scale and density (a laser cluster on the segmentation's
         5 mm grid matches a database built with the fixed 5 mm grid, not with "auto" on dense views).
     seed : int or Generator, default 0
@@ -135,7 +136,9 @@ def _checked_views(views, classes, model_views, caller: str):
     seen = {(label, view_id) for label, view_id, _ in views}
     unused = set(class_infos) - {lab for lab, _ in seen}
     if unused:
-        raise InputError(f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}.")
+        raise InputError(
+            f"The 'classes' argument of {caller} describes classes without views: {', '.join(sorted(unused))}."
+        )
     models = _check_model_views(model_views, class_infos, caller)
     return views, class_infos, models
 
@@ -331,7 +334,9 @@ def read_view_folder(views_dir: str | Path, *, clean: bool = True) -> tuple[list
                         raise DatabaseError(str(exc)) from None
                 views.append((class_dir.name, f.stem, cloud))
     if not views:
-        raise DatabaseError(f"The views folder {str(root)!r} holds no CLASS/VIEW{{{','.join(POINT_FILE_SUFFIXES)}}} files.")
+        raise DatabaseError(
+            f"The views folder {str(root)!r} holds no CLASS/VIEW{{{','.join(POINT_FILE_SUFFIXES)}}} files."
+        )
     return views, declared, meta_path
 
 

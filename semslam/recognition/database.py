@@ -184,7 +184,9 @@ class ViewDatabase:
         try:
             return self.class_infos[label]
         except KeyError:
-            raise DatabaseError(f"The class {label!r} is not in the database. Known classes: {', '.join(self.classes)}.") from None
+            raise DatabaseError(
+                f"The class {label!r} is not in the database. Known classes: {', '.join(self.classes)}."
+            ) from None
 
     def symmetries(self) -> dict:
         """``{class: Symmetry}``: what SLAM needs to know of each class (:func:`semslam.run.run_slam`)."""
@@ -355,8 +357,10 @@ def _check_consistency(db: ViewDatabase, where: str, error: type[SemslamError]) 
     for name, (kind, ndim) in expected.items():
         arr = getattr(db, name)
         if not isinstance(arr, np.ndarray) or arr.dtype.kind != kind or arr.ndim != ndim:
-            raise error(f"{where}: the array {name!r} must be a {ndim}-D array of kind {kind!r}. "
-                        f"Got {getattr(arr, 'dtype', type(arr))} with {getattr(arr, 'ndim', '?')} dimension(s) instead.")
+            raise error(
+                f"{where}: the array {name!r} must be a {ndim}-D array of kind {kind!r}. "
+                f"Got {getattr(arr, 'dtype', type(arr))} with {getattr(arr, 'ndim', '?')} dimension(s) instead."
+            )
     v = len(db.labels)
     shapes = {"view_ids": (v,), "point_offsets": (v + 1,), "viewpoints_xyz_m": (v, 3),
               "esf": (v, ESF_BINS), "vfh": (v, VFH_BINS)}
@@ -387,8 +391,10 @@ def _check_model_arrays(db: ViewDatabase, where: str, error: type[SemslamError])
     for name, arr, kind, ndim in (("model_labels", labels, "U", 1), ("model_point_offsets", off, "i", 1),
                                   ("model_points_xyz_m", pts, "f", 2), ("model_viewpoints_xyz_m", vps, "f", 2)):
         if not isinstance(arr, np.ndarray) or arr.ndim != ndim or (arr.dtype.kind != kind and arr.size):
-            raise error(f"{where}: the array {name!r} must be a {ndim}-D array of kind {kind!r}. "
-                        f"Got {getattr(arr, 'dtype', type(arr))} with {getattr(arr, 'ndim', '?')} dimension(s) instead.")
+            raise error(
+                f"{where}: the array {name!r} must be a {ndim}-D array of kind {kind!r}. "
+                f"Got {getattr(arr, 'dtype', type(arr))} with {getattr(arr, 'ndim', '?')} dimension(s) instead."
+            )
     m = len(labels)
     if off.shape != (m + 1,) or vps.shape != (m, 3) or pts.shape[1:] != (3,):
         raise error(f"{where}: 'model_point_offsets' must have shape ({m + 1},), 'model_viewpoints_xyz_m' ({m}, 3) "

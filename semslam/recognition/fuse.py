@@ -123,7 +123,9 @@ def _read_view_rows(path: str | Path, what: str, headers: tuple, expected: str, 
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) != len(header):
-            raise DatabaseError(f"Line {lineno} of the {what} file {where!r} has {len(row)} fields; expected {len(header)}.")
+            raise DatabaseError(
+                f"Line {lineno} of the {what} file {where!r} has {len(row)} fields; expected {len(header)}."
+            )
         view = row[0].strip()
         try:
             values = np.array([float(v) for v in row[1:]])
@@ -150,7 +152,9 @@ def _pose_from_values(values: np.ndarray, quaternion: bool, where: str) -> np.nd
     if quaternion:
         q = values[3:]
         if abs(np.linalg.norm(q) - 1.0) > ROTATION_TOLERANCE:
-            raise DatabaseError(f"The quaternion on {where} must have unit length. Got norm {np.linalg.norm(q):.6g} instead.")
+            raise DatabaseError(
+                f"The quaternion on {where} must have unit length. Got norm {np.linalg.norm(q):.6g} instead."
+            )
         T[:3, :3], T[:3, 3] = rotation_from_quat_wxyz(q / np.linalg.norm(q)), values[:3]
         return T
     T = values.reshape(4, 4)
@@ -256,7 +260,9 @@ def _estimate(pts: list, ups: list | None, seed: int, label: str, ids: list) -> 
             else:
                 res = register(pts[i], model, seed=seed)
         except RegistrationError as exc:
-            raise DatabaseError(f"Cannot align view {ids[i]!r} of class {label!r} onto the views before it: {exc}") from None
+            raise DatabaseError(
+                f"Cannot align view {ids[i]!r} of class {label!r} onto the views before it: {exc}"
+            ) from None
         Ts.append(np.asarray(res.T_target_source.matrix))
     return Ts
 

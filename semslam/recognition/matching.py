@@ -332,9 +332,13 @@ def _log2_grid(name: str, spec: Any, caller: str) -> np.ndarray:
     try:
         start, stop, step = (int(v) for v in spec)
     except (TypeError, ValueError):
-        raise InputError(f"The {name!r} argument of {caller} must be (start, stop, step) integers. Got {spec!r} instead.") from None
+        raise InputError(
+            f"The {name!r} argument of {caller} must be (start, stop, step) integers. Got {spec!r} instead."
+        ) from None
     if step <= 0 or stop < start:
-        raise InputError(f"The {name!r} argument of {caller} must have step > 0 and stop >= start. Got {spec!r} instead.")
+        raise InputError(
+            f"The {name!r} argument of {caller} must have step > 0 and stop >= start. Got {spec!r} instead."
+        )
     return np.arange(start, stop + 1, step, dtype=float)
 
 

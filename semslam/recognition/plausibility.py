@@ -107,7 +107,9 @@ def touches_scan_border(points_xyz_m: np.ndarray, scan_extent_rad: np.ndarray, v
     return border_touched(pts, ext, vp, float(margin_rad))
 
 
-def border_touched(pts: np.ndarray, scan_extent_rad: np.ndarray, viewpoint_xyz_m: np.ndarray, margin_rad: float) -> bool:
+def border_touched(
+    pts: np.ndarray, scan_extent_rad: np.ndarray, viewpoint_xyz_m: np.ndarray, margin_rad: float
+) -> bool:
     """:func:`touches_scan_border` on C-contiguous float64 arrays already checked (no validation).
 
     The cluster's own angular extent comes from the one-pass kernel that measures the scan's footprint in

@@ -70,7 +70,9 @@ class Recognizer:
     def __init__(self, db: ViewDatabase, *, descriptor: str = "esf", rejection: str = "global",
                  reject_quantile: float = 0.95, reject_margin: float = 1.0) -> None:
         if not isinstance(db, ViewDatabase):
-            raise RecognitionError(f"The 'db' argument of Recognizer must be a ViewDatabase. Got {type(db).__name__} instead.")
+            raise RecognitionError(
+                f"The 'db' argument of Recognizer must be a ViewDatabase. Got {type(db).__name__} instead."
+            )
         self.db = db
         self.descriptor = check_choice("descriptor", descriptor, DESCRIPTORS, caller="Recognizer")
         self.classifier = Chi2NearestNeighbor(rejection=rejection, reject_quantile=reject_quantile,

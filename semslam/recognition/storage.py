@@ -63,8 +63,10 @@ def load_database(path: str | Path, *, verify: bool = True) -> ViewDatabase:
                 raise DatabaseError(f"{where} is not a semslam view database: it has no 'meta' entry.")
             meta = json.loads(str(npz["meta"][()]))
             if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-                raise DatabaseError(f"{where} is not a semslam view database: format is "
-                                    f"{meta.get('format') if isinstance(meta, dict) else meta!r}, expected {FORMAT_NAME!r}.")
+                raise DatabaseError(
+                    f"{where} is not a semslam view database: format is "
+                    f"{meta.get('format') if isinstance(meta, dict) else meta!r}, expected {FORMAT_NAME!r}."
+                )
             version = meta.get("version")
             if version not in READABLE_VERSIONS:
                 raise DatabaseError(f"{where} has format version {version!r}; this semslam reads versions "

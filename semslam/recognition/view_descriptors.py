@@ -229,7 +229,8 @@ def compute_view_descriptors(cloud: PointCloud, *, vfh_variant: str | None = Non
     With ``voxel_leaf_m`` the cloud is first reduced to its voxel-grid centroids (PCL ``VoxelGrid``), so
     that dense views (a Kinect at 0.7 m, ~1.3 mm spacing) and sparse queries (laser-scan clusters after
     the segmentation's 5 mm grid) are described at the same density: ESF's occupancy grid and the
-    normals depend on it. Normals are estimated within ``normal_radius_m`` and flipped towards ``cloud.viewpoint_xyz_m``; points
+    normals depend on it. Normals are estimated within ``normal_radius_m`` and flipped towards
+    ``cloud.viewpoint_xyz_m``; points
     without a normal (fewer than 3 neighbours) are left out of the VFH. The VFH viewpoint is the cloud's.
 
     Parameters

@@ -64,7 +64,9 @@ def prepare(src_pts: np.ndarray, tgt_pts: np.ndarray, cfg, clock: Clock) -> dict
             try:
                 spacings.append(point_spacing_m(pts))
             except DescriptorError as exc:
-                raise RegistrationError(f"The {name} cloud has no usable point spacing for voxel_m='auto': {exc}") from None
+                raise RegistrationError(
+                    f"The {name} cloud has no usable point spacing for voxel_m='auto': {exc}"
+                ) from None
         # the RANSAC scores every source voxel per hypothesis; the target only costs KD-tree queries
         voxel = P.auto_voxel(full, spacings, [cfg.max_voxels, TARGET_VOXELS_FACTOR * cfg.max_voxels],
                              voxel_downsample)

@@ -162,9 +162,13 @@ def _checked_settings(max_iterations: Any, n_samples: Any, k_correspondences: An
     max_corr = check_positive("max_correspondence_m", max_correspondence_m, caller=_CALLER) \
         if np.isfinite(max_correspondence_m) else float("inf")
     if not (0.0 <= float(inlier_fraction) <= 1.0):
-        raise InputError(f"The 'inlier_fraction' argument of {_CALLER} must be in [0, 1]. Got {inlier_fraction!r} instead.")
+        raise InputError(
+            f"The 'inlier_fraction' argument of {_CALLER} must be in [0, 1]. Got {inlier_fraction!r} instead."
+        )
     if stop_fraction is not None and not (0.0 < float(stop_fraction) <= 1.0):
-        raise InputError(f"The 'stop_fraction' argument of {_CALLER} must be None or in (0, 1]. Got {stop_fraction!r} instead.")
+        raise InputError(
+            f"The 'stop_fraction' argument of {_CALLER} must be None or in (0, 1]. Got {stop_fraction!r} instead."
+        )
     batch_size = check_int("batch_size", batch_size, caller=_CALLER, minimum=1)
     check_choice("selection", selection, ("error", "msac"), caller=_CALLER)
     if selection == "msac" and not np.isfinite(max_corr):
@@ -272,11 +276,25 @@ def _coarse_result(src: np.ndarray, tree: cKDTree, state: _Search, T_init: np.nd
     T = _orthonormalise(T)
     fitness, rmse, n_in = inlier_statistics(src @ T[:3, :3].T + T[:3, 3], tree, max_corr)
     return RegistrationResult(
-        T_target_source=RigidTransform(T), fitness=fitness, inlier_rmse_m=rmse, n_iterations=state.n_drawn,
-        converged=converged, n_inliers=n_in, max_correspondence_m=max_corr, method="prerejective",
-        timings_ms={"feature_matching": 1e3 * (t2 - t1), "ransac": 1e3 * (t3 - t2), "total": 1e3 * (time.perf_counter() - t0)},
-        extras={"n_prerejected": state.n_rejected, "n_scored": state.n_scored,
-                "best_error_m2": state.best_err if converged else None, "budget_exhausted": state.exhausted},
+        T_target_source=RigidTransform(T),
+        fitness=fitness,
+        inlier_rmse_m=rmse,
+        n_iterations=state.n_drawn,
+        converged=converged,
+        n_inliers=n_in,
+        max_correspondence_m=max_corr,
+        method="prerejective",
+        timings_ms={
+            "feature_matching": 1e3 * (t2 - t1),
+            "ransac": 1e3 * (t3 - t2),
+            "total": 1e3 * (time.perf_counter() - t0),
+        },
+        extras={
+            "n_prerejected": state.n_rejected,
+            "n_scored": state.n_scored,
+            "best_error_m2": state.best_err if converged else None,
+            "budget_exhausted": state.exhausted,
+        },
     )
 
 
@@ -304,7 +322,10 @@ def _initial_guess(init_T: Any, src: np.ndarray, tgt: np.ndarray) -> np.ndarray 
         return None
     if isinstance(init_T, str):
         if init_T != "centroid":
-            raise InputError(f"The 'init_T' argument of {_CALLER} must be None, 'centroid' or a 4x4 transform. Got {init_T!r} instead.")
+            raise InputError(
+                f"The 'init_T' argument of {_CALLER} must be None, 'centroid' or a 4x4 transform. Got {init_T!r} "
+                f"instead."
+            )
         T = np.eye(4)
         T[:3, 3] = tgt.mean(axis=0) - src.mean(axis=0)
         return T

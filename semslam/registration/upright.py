@@ -81,7 +81,9 @@ class UprightConfig:
         if self.max_correspondence_m is not None:
             check_positive("max_correspondence_m", self.max_correspondence_m, caller=caller)
         if not 0.0 <= float(self.min_fitness) <= 1.0:
-            raise RegistrationError(f"The 'min_fitness' setting of {caller} must be in [0, 1]. Got {self.min_fitness!r} instead.")
+            raise RegistrationError(
+                f"The 'min_fitness' setting of {caller} must be in [0, 1]. Got {self.min_fitness!r} instead."
+            )
 
 
 def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -103,7 +105,9 @@ def _unit(name: str, value: Any, caller: str) -> np.ndarray:
     v = as_float_array(name, value, (3,), caller=caller)
     m = float(np.abs(v).max())
     if not m > 0.0:
-        raise RegistrationError(f"The '{name}' argument of {caller} must be a non-zero 3-vector (up direction). Got {v.tolist()} instead.")
+        raise RegistrationError(
+            f"The '{name}' argument of {caller} must be a non-zero 3-vector (up direction). Got {v.tolist()} instead."
+        )
     v = v / m
     return v / float(np.linalg.norm(v))
 
@@ -166,7 +170,9 @@ def align_upright(source: Any, target: Any, *, up_source: Any, up_target: Any,
     if ambiguous:
         spread = np.radians(max(_angle_deg(h["yaw_deg"] - best["yaw_deg"]) for h in rivals
                                 if h["rms_m"] <= cfg.ambiguity_ratio * best["rms_m"]))
-        cov[:3, :3] += np.outer(u_t, u_t) * (spread ** 2 - np.radians(yaw_sigma) ** 2 if spread > np.radians(yaw_sigma) else 0.0)
+        cov[:3, :3] += np.outer(u_t, u_t) * (
+            spread**2 - np.radians(yaw_sigma) ** 2 if spread > np.radians(yaw_sigma) else 0.0
+        )
         yaw_sigma = float(np.degrees(spread))
     reliable = (not ambiguous) and best["fitness"] >= cfg.min_fitness
     T = np.eye(4)

@@ -56,7 +56,9 @@ def load_trajectory_csv(path: Path) -> dict:
            "position_cov": cov}
     truth_cols = [c for c in ("truth_x_m", "truth_y_m", "truth_z_m") if c in col]
     if truth_cols and len(truth_cols) != 3:
-        raise ReportError(f"{path} lacks the columns {sorted({'truth_x_m', 'truth_y_m', 'truth_z_m'} - set(truth_cols))}")
+        raise ReportError(
+            f"{path} lacks the columns {sorted({'truth_x_m', 'truth_y_m', 'truth_z_m'} - set(truth_cols))}"
+        )
     if truth_cols:
         out["truth_position_ned_m"] = data[:, [col["truth_x_m"], col["truth_y_m"], col["truth_z_m"]]]
     if "yaw_bias_rad" in col:

@@ -46,8 +46,13 @@ def _section_tables(run_dir: Path, plt) -> Section | None:
             fig, ax = plt.subplots(figsize=(5.2, 4.4))
             plot_confusion_matrix(ax, conf, [human_label(x) for x in labels],
                                   title=f"{desc.upper()} + {clf.upper()}: {100 * ev['accuracy']:.2f}% correct")
-            sec.figures.append(Figure(f"table_{key}.png", figure_to_png(fig),
-                                      f"Confusion matrix, {desc.upper()} features, {clf.upper()} classifier, leave-one-out."))
+            sec.figures.append(
+                Figure(
+                    f"table_{key}.png",
+                    figure_to_png(fig),
+                    f"Confusion matrix, {desc.upper()} features, {clf.upper()} classifier, leave-one-out.",
+                )
+            )
     sec.tables.append(("Leave-one-out accuracy", ["descriptor", "classifier", "accuracy", "per-class recall"], rows))
     return sec
 
@@ -58,7 +63,13 @@ def _section_fig3(run_dir: Path, plt) -> Section | None:
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as z:
-        pts, cluster, labels, poses, scan_id = z["points_xyz_m"], z["cluster"], z["labels"], z["T_scanner_object"], int(z["scan_id"])
+        pts, cluster, labels, poses, scan_id = (
+            z["points_xyz_m"],
+            z["cluster"],
+            z["labels"],
+            z["T_scanner_object"],
+            int(z["scan_id"]),
+        )
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
     bg = cluster < 0
     step = max(1, int(bg.sum() // 40000))
@@ -114,16 +125,20 @@ def _section_recognition(run_dir: Path, plt) -> Section | None:
     if rec is None:
         return None
     s = rec["summary"]
-    rows = [["scans", s["n_scans"]], ["clusters", s["n_clusters"]], ["detections", s["n_detections"]],
-            ["precision (detections with the right class)", _pct(s["precision"])],
-            ["recall (object clusters recognised)", _pct(s["recall"])],
-            ["background clusters accepted as an object", f"{s['background_false_accepts']} of {s['background_clusters']}"],
-            ["detections with a reliable pose", s["n_reliable"]],
-            ["median rotation error (deg, modulo symmetry)", s["pose_median_rotation_error_deg"]],
-            ["median translation error (m)", s["pose_median_translation_error_m"]],
-            ["pose success rate (< 10 deg and < 1 cm)", _pct(s["pose_success_rate"])],
-            ["mean pose NEES (6 dof; ideal 6)", s["pose_mean_nees_6dof"]],
-            ["median scan-to-detections latency (ms)", s["scan_latency_ms_median"]]]
+    rows = [
+        ["scans", s["n_scans"]],
+        ["clusters", s["n_clusters"]],
+        ["detections", s["n_detections"]],
+        ["precision (detections with the right class)", _pct(s["precision"])],
+        ["recall (object clusters recognised)", _pct(s["recall"])],
+        ["background clusters accepted as an object", f"{s['background_false_accepts']} of {s['background_clusters']}"],
+        ["detections with a reliable pose", s["n_reliable"]],
+        ["median rotation error (deg, modulo symmetry)", s["pose_median_rotation_error_deg"]],
+        ["median translation error (m)", s["pose_median_translation_error_m"]],
+        ["pose success rate (< 10 deg and < 1 cm)", _pct(s["pose_success_rate"])],
+        ["mean pose NEES (6 dof; ideal 6)", s["pose_mean_nees_6dof"]],
+        ["median scan-to-detections latency (ms)", s["scan_latency_ms_median"]],
+    ]
     sec = Section("Recognition and pose estimation against the ground truth (beyond the papers)",
                   "Every cluster of every scan compared with the simulator's ground truth: the object most of its "
                   "points lie on, and that object's true pose at the cluster's acquisition time.",
@@ -206,13 +221,15 @@ def _section_consensus(run_dir: Path, plt) -> Section | None:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(f"Consensus initialisation of the first landmark ({human_label(c['label'])}); arrows: object heading")
-    return Section("Landmark initialisation by consensus (second paper)",
-                   f"Unassociated observations of class {human_label(c['label'])} in the world frame. Two observations agree when "
-                   f"their positions are closer than {c['position_threshold_m']} m and their attitude distance "
-                   f"1 - <q1, q2>^2 is below {c['attitude_threshold']}; the observation with the most agreement and "
-                   f"its consensus set (at least {c['min_observations']} observations) give the initial pose "
-                   "(mean position, eigenvector quaternion mean).",
-                   figures=[Figure("consensus.png", figure_to_png(fig), "Consensus initialisation.")])
+    return Section(
+        "Landmark initialisation by consensus (second paper)",
+        f"Unassociated observations of class {human_label(c['label'])} in the world frame. Two observations agree when "
+        f"their positions are closer than {c['position_threshold_m']} m and their attitude distance "
+        f"1 - <q1, q2>^2 is below {c['attitude_threshold']}; the observation with the most agreement and "
+        f"its consensus set (at least {c['min_observations']} observations) give the initial pose "
+        "(mean position, eigenvector quaternion mean).",
+        figures=[Figure("consensus.png", figure_to_png(fig), "Consensus initialisation.")],
+    )
 
 
 

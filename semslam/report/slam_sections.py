@@ -68,15 +68,32 @@ def _section_fig4(trajs: dict, metrics: dict, truth, landmarks: dict, objects_xy
         runs_plot = {"truth": truth, **trajs}
     plot_trajectories(ax, runs_plot, landmarks=landmarks, objects_xy=objects_xy,
                       title="Fig. 4: trajectories with 3-sigma ellipses (every 30 s) and mapped landmarks")
-    sec = Section("Fig. 4: dead reckoning and SLAM trajectories",
-                  "All modes run on the same navigation data and the same detections. Ellipses: 3-sigma position "
-                  "uncertainty in the horizontal plane; stars: true object positions; crosses: mapped landmarks.",
-                  tables=[("Trajectory metrics per mode (smoothed: RTS over the whole mission, offline"
-                           + ("; with a graph backend, the graph's estimate at the end of the dive)"
-                              if any(m.get("backend") in GRAPH_BACKENDS for m in metrics.values()) else ")"),
-                           ["mode", "ATE RMSE (m)", "smoothed ATE RMSE (m)", "final error (m)", "max error (m)",
-                            "mean position NEES (dof 3)", "landmarks"], rows)],
-                  figures=[Figure("fig4_trajectories.png", figure_to_png(fig), "Trajectories, 3-sigma ellipses, landmarks.")])
+    sec = Section(
+        "Fig. 4: dead reckoning and SLAM trajectories",
+        "All modes run on the same navigation data and the same detections. Ellipses: 3-sigma position "
+        "uncertainty in the horizontal plane; stars: true object positions; crosses: mapped landmarks.",
+        tables=[
+            (
+                "Trajectory metrics per mode (smoothed: RTS over the whole mission, offline"
+                + (
+                    "; with a graph backend, the graph's estimate at the end of the dive)"
+                    if any(m.get("backend") in GRAPH_BACKENDS for m in metrics.values())
+                    else ")"
+                ),
+                [
+                    "mode",
+                    "ATE RMSE (m)",
+                    "smoothed ATE RMSE (m)",
+                    "final error (m)",
+                    "max error (m)",
+                    "mean position NEES (dof 3)",
+                    "landmarks",
+                ],
+                rows,
+            )
+        ],
+        figures=[Figure("fig4_trajectories.png", figure_to_png(fig), "Trajectories, 3-sigma ellipses, landmarks.")],
+    )
     return sec
 
 
@@ -90,8 +107,13 @@ def _section_fig6(runs: dict[str, Path], trajs: dict, truth: dict, plt) -> Secti
             det_stamps.append(float(row["stamp_s"]))
     fig6 = {m: trajs[m] for m in ("dr", "position", "pose") if m in trajs} or trajs
     fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True)
-    plot_error_bounds(axes, fig6, truth, detection_stamps_s=det_stamps,
-                      title="Fig. 6: position error (solid) and +-3-sigma bounds (dashed); green lines: landmark updates")
+    plot_error_bounds(
+        axes,
+        fig6,
+        truth,
+        detection_stamps_s=det_stamps,
+        title="Fig. 6: position error (solid) and +-3-sigma bounds (dashed); green lines: landmark updates",
+    )
     return Section("Fig. 6: position error and +-3-sigma bounds over time",
                    "Dead reckoning's bounds grow without limit; SLAM's shrink at every landmark update.",
                    figures=[Figure("fig6_error_bounds.png", figure_to_png(fig), "Errors and 3-sigma bounds.")])
@@ -195,7 +217,9 @@ def _sections_without_truth(trajs: dict, landmarks: dict, plt) -> list[Section]:
     for mode, lms in landmarks.items():
         for k, lm in enumerate(lms):
             sig = np.sqrt(np.clip(np.diag(lm["cov"]), 0, None))
-            rows.append([mode, k, human_label(lm["label"]), *[float(v) for v in lm["position_ned_m"]], *[float(v) for v in sig]])
+            rows.append(
+                [mode, k, human_label(lm["label"]), *[float(v) for v in lm["position_ned_m"]], *[float(v) for v in sig]]
+            )
     if rows:
         out.append(Section("Landmark maps", "Each mode's map at the end of the dive (world NED).",
                            tables=[("Landmarks", ["mode", "#", "class", "x (m)", "y (m)", "z (m)", "sigma x (m)",

@@ -38,8 +38,10 @@ def feed_message(session: Any, stamp_s: float, kind: str, payload: tuple) -> Non
     elif kind == "detections":
         session.add_detections(stamp_s, *payload)
     else:
-        raise SlamError(f"The 'kind' argument of feed_message must be attitude, dvl, depth, fix or detections. Got {kind!r} "
-                        "instead.")
+        raise SlamError(
+            f"The 'kind' argument of feed_message must be attitude, dvl, depth, fix or detections. Got {kind!r} "
+            "instead."
+        )
 
 
 def merged_messages(dataset: Dataset, detections_by_scan: dict[int, list[Detection]]):

@@ -58,8 +58,12 @@ def write_run(result: SlamResult, out_dir: str | Path) -> Path:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     head = ["stamp_s", "x_m", "y_m", "z_m", "u_mps", "v_mps", "w_mps"]
-    head += [f"cov_p_{a}{b}" for a in "xyz" for b in "xyz" if a <= b] + [f"cov_v_{a}{b}" for a in "uvw" for b in "uvw" if a <= b]
-    head += ["yaw_bias_rad", "roll_rad", "pitch_rad", "yaw_rad"] + (["truth_x_m", "truth_y_m", "truth_z_m"] if result.truth_position_ned_m is not None else [])
+    head += [f"cov_p_{a}{b}" for a in "xyz" for b in "xyz" if a <= b] + [
+        f"cov_v_{a}{b}" for a in "uvw" for b in "uvw" if a <= b
+    ]
+    head += ["yaw_bias_rad", "roll_rad", "pitch_rad", "yaw_rad"] + (
+        ["truth_x_m", "truth_y_m", "truth_z_m"] if result.truth_position_ned_m is not None else []
+    )
     w.writerow(head)
     iu = np.triu_indices(3)
     for k in range(len(result.stamps_s)):

@@ -219,11 +219,18 @@ class Runner:
         fix = [(t, p) for t, p in fix if np.isfinite(p.position_ne_m).all() and _usable_cov(p.covariance_ne_m2)]
         dvl = [(t, p) for t, _, _, k, p in items if k == "dvl"]
         self.start = initial_state(
-            t0, depth_stamps_s=[t for t, _ in dep], depth_m=[z for _, z in dep],
-            depth_noise_m=self.vehicle.depth.noise_m, fix_stamps_s=[t for t, _ in fix],
-            fix_positions_ne_m=[p.position_ne_m for _, p in fix], fix_covariances_ne_m2=[p.covariance_ne_m2 for _, p in fix],
-            dvl_stamps_s=[t for t, _ in dvl], dvl_velocities_mps=[p.velocity_mps for _, p in dvl],
-            dvl_valid=[p.valid for _, p in dvl], config=self.cfg)
+            t0,
+            depth_stamps_s=[t for t, _ in dep],
+            depth_m=[z for _, z in dep],
+            depth_noise_m=self.vehicle.depth.noise_m,
+            fix_stamps_s=[t for t, _ in fix],
+            fix_positions_ne_m=[p.position_ne_m for _, p in fix],
+            fix_covariances_ne_m2=[p.covariance_ne_m2 for _, p in fix],
+            dvl_stamps_s=[t for t, _ in dvl],
+            dvl_velocities_mps=[p.velocity_mps for _, p in dvl],
+            dvl_valid=[p.valid for _, p in dvl],
+            config=self.cfg,
+        )
         for mode in self.modes:
             s = make_session(self.vehicle, self.start, mode=mode, config=self.cfg, symmetries=self.symmetries,
                              backend=self.backend, huber_k=self.huber_k)

@@ -161,9 +161,11 @@ def _bag_dive(path: Path, topics: Any, vehicle: VehicleDescription | None, msg_d
 
             vehicle, used["vehicle"] = read_vehicle_toml(companion(path, "vehicle")), str(companion(path, "vehicle"))
         else:
-            raise InputError(f"The bag {str(path)!r} has no vehicle description: give --vehicle FILE (the scanner's and "
-                             f"the DVL's mounting; 'girona500' for the documented defaults) or put "
-                             f"{companion(path, 'vehicle').name!r} beside it.")
+            raise InputError(
+                f"The bag {str(path)!r} has no vehicle description: give --vehicle FILE (the scanner's and "
+                f"the DVL's mounting; 'girona500' for the documented defaults) or put "
+                f"{companion(path, 'vehicle').name!r} beside it."
+            )
     else:
         used["vehicle"] = "given"
     bag = open_bag(path, msg_dirs=msg_dirs)

@@ -97,7 +97,9 @@ def clean_view(cloud: PointCloud, *, drop_origin: bool = True, drop_drawn_lines:
     Raises :class:`~semslam.errors.InputError` naming ``name`` when no point is left.
     """
     if not isinstance(cloud, PointCloud):
-        raise InputError(f"The 'cloud' argument of clean_view must be a PointCloud. Got {type(cloud).__name__} instead.")
+        raise InputError(
+            f"The 'cloud' argument of clean_view must be a PointCloud. Got {type(cloud).__name__} instead."
+        )
     pts = cloud.points_xyz_m
     bad = origin_mask(pts, cloud.viewpoint_xyz_m) if drop_origin else np.zeros(len(pts), dtype=bool)
     n_origin = int(bad.sum())

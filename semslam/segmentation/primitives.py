@@ -165,7 +165,9 @@ def fit_primitive(points_xyz_m, normals_xyz, kind: str, *, distance_m: float, ma
         return None
     p, n = pts[valid], nrm[valid]
     draws = np.stack([rng.integers(0, len(valid), size=iterations) for _ in range(need)], axis=1)
-    draws = draws[(draws[:, 0] != draws[:, 1]) & ((need == 2) | ((draws[:, 0] != draws[:, -1]) & (draws[:, 1] != draws[:, -1])))]
+    draws = draws[
+        (draws[:, 0] != draws[:, 1]) & ((need == 2) | ((draws[:, 0] != draws[:, -1]) & (draws[:, 1] != draws[:, -1])))
+    ]
     if kind == "cylinder":
         c, a, r = _cylinder_hypotheses(p, n, draws[:, 0], draws[:, 1], lo, hi)
     else:

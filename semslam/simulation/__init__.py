@@ -1,5 +1,6 @@
 """semslam.simulation: the simulator (object meshes, Kinect view database, CIRS-like tank, laser
-scanner, vehicle motion, navigation sensors) writing datasets (and, through :mod:`semslam.io.ros`, bags). The data types are :mod:`semslam.dataset`."""
+scanner, vehicle motion, navigation sensors) writing datasets (and, through :mod:`semslam.io.ros`, bags). The data
+types are :mod:`semslam.dataset`."""
 
 from .catalogue import CATALOGUE_LABELS, catalogue_objects
 from .config import (

@@ -159,8 +159,18 @@ def _build_split(mesh: trimesh.Trimesh, offset: np.ndarray, normals: np.ndarray,
     if len(small_ids):
         scene = rtcs.EmbreeScene()
         TriangleMesh(scene, (tris[small_ids] - offset).astype(np.float32))
-    return SplitScene(large_ids, np.ascontiguousarray(t), np.ascontiguousarray(t[:, 0]), np.ascontiguousarray(n), edge_n, edge_c,
-                      centres, radii, scene, small_ids)
+    return SplitScene(
+        large_ids,
+        np.ascontiguousarray(t),
+        np.ascontiguousarray(t[:, 0]),
+        np.ascontiguousarray(n),
+        edge_n,
+        edge_c,
+        centres,
+        radii,
+        scene,
+        small_ids,
+    )
 
 
 def _group_spheres(tris: np.ndarray, centroid: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray]:

@@ -82,7 +82,11 @@ def merge_small_hits(tri, t_hit, cand, small_tri, dirs_local, R, t, m, v0, norma
         i = cand[q]
         k = i // m
         dx, dy, dz = _direction(R, k, dirs_local, i)
-        num = (v0[f, 0] - t[k, 0]) * normals[f, 0] + (v0[f, 1] - t[k, 1]) * normals[f, 1] + (v0[f, 2] - t[k, 2]) * normals[f, 2]
+        num = (
+            (v0[f, 0] - t[k, 0]) * normals[f, 0]
+            + (v0[f, 1] - t[k, 1]) * normals[f, 1]
+            + (v0[f, 2] - t[k, 2]) * normals[f, 2]
+        )
         den = dx * normals[f, 0] + dy * normals[f, 1] + dz * normals[f, 2]
         if den != 0.0 and num / den < t_hit[i]:
             tri[i] = f

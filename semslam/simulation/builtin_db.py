@@ -67,7 +67,9 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
     from .model_views import with_resting_up
     from .objects import builtin_objects
 
-    db = with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, **kwargs), builtin_objects())
+    db = with_resting_up(
+        build_database(views, classes, seed=seed, model_views=model_views, **kwargs), builtin_objects()
+    )
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

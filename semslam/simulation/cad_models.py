@@ -130,7 +130,8 @@ def _transform(value: Any, where: str) -> np.ndarray:
     det = float(np.linalg.det(R))
     if ortho > ROTATION_TOL or abs(det - 1.0) > ROTATION_TOL:
         raise DatabaseError(f"{where} must be a rigid transform: its 3x3 block a rotation (orthonormal, det +1, "
-                            f"tolerance {ROTATION_TOL:g}). Got max |R^T R - I| = {ortho:.3g} and det = {det:.6g} instead.")
+                            f"tolerance {ROTATION_TOL:g}). Got max |R^T R - I| = {ortho:.3g} and det = {det:.6g} "
+                            f"instead.")
     U, _, Vt = np.linalg.svd(R)
     T[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     return T

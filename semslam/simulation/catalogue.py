@@ -48,7 +48,9 @@ def _sphere(radius_m: float, centre=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
 
 def _bolt_holes(pcd_r: float, hole_r: float, z0: float, z1: float, n: int = 8) -> list:
     a = 2 * np.pi * (np.arange(n) + 0.5) / n
-    return [_cyl(hole_r, (pcd_r * np.cos(t), pcd_r * np.sin(t), z0), (pcd_r * np.cos(t), pcd_r * np.sin(t), z1)) for t in a]
+    return [
+        _cyl(hole_r, (pcd_r * np.cos(t), pcd_r * np.sin(t), z0), (pcd_r * np.cos(t), pcd_r * np.sin(t), z1)) for t in a
+    ]
 
 
 def _frustum(r0: float, r1: float, z0: float, z1: float, sections: int = 48) -> trimesh.Trimesh:

@@ -131,7 +131,8 @@ class TrajectoryConfig(_Dict):
                        "speed_wander_mps", "crab_rms_rad"))
         if self.speed_wander_mps > 0.25 * self.speed_mps:
             raise SimulationError("The 'speed_wander_mps' field of TrajectoryConfig must be <= speed_mps / 4 (the vehicle "
-                                  f"never stops or reverses). Got {self.speed_wander_mps} with speed_mps {self.speed_mps} instead.")
+                                  f"never stops or reverses). Got {self.speed_wander_mps} with speed_mps "
+                                  f"{self.speed_mps} instead.")
         if self.crab_rms_rad > math.radians(10.0):
             raise SimulationError(f"The 'crab_rms_rad' field of TrajectoryConfig must be <= 10 degrees. Got {self.crab_rms_rad} rad instead.")
         if isinstance(self.loops, bool) or not isinstance(self.loops, int) or self.loops < 1:
@@ -241,7 +242,8 @@ class DvlConfig(_Dict):
     ``slope_*`` ones, and a second Gauss-Markov bias (std ``slope_bias_sigma_mps``, correlation time
     ``slope_bias_tau_s``) is driven; it decays with that time once the beams are back on the flat floor (the
     papers: flying over the tank's ~73-degree slopes "is known to generate a significant noise on the DVL
-    readings" and caused most of their dead-reckoning drift; the magnitudes are assumptions). An outlier adds N(0, ``outlier_std_mps``) per axis; a dropout is an invalid
+    readings" and caused most of their dead-reckoning drift; the magnitudes are assumptions). An outlier adds N(0,
+    ``outlier_std_mps``) per axis; a dropout is an invalid
     (NaN) row. Setting the four systematic terms to 0 gives a white-noise-only DVL.
     """
 

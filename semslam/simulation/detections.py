@@ -57,7 +57,9 @@ class TruthDetectionConfig:
         for name in ("p_detect", "false_rate", "misclassification_rate"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0) or (name == "false_rate" and v >= 1.0):
-                raise InputError(f"The {name!r} field of TruthDetectionConfig must be a probability in [0, 1). Got {v!r} instead.")
+                raise InputError(
+                    f"The {name!r} field of TruthDetectionConfig must be a probability in [0, 1). Got {v!r} instead."
+                )
 
     def to_dict(self) -> dict:
         return {k: float(v) for k, v in asdict(self).items()}

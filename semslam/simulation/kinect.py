@@ -105,13 +105,16 @@ def acquire_views(model: ObjectModel, *, n_views: int = 8, config: KinectConfig 
         az = 2 * np.pi * k / n
         cloud = kinect_view(model, az, config=config, seed=rng)
         if cloud.n_points == 0:
-            raise SimulationError(f"The Kinect view {k} of {model.label!r} saw no point; check KinectConfig.distance_m.")
+            raise SimulationError(
+                f"The Kinect view {k} of {model.label!r} saw no point; check KinectConfig.distance_m."
+            )
         out.append((f"{model.label}_az{round(np.degrees(az)):03d}", cloud))
     return out
 
 
-def builtin_view_clouds(*, seed: int | np.random.Generator | None = 0, n_views: int = 8,
-                        config: KinectConfig | None = None) -> tuple[list[tuple[str, str, PointCloud]], dict[str, dict]]:
+def builtin_view_clouds(
+    *, seed: int | np.random.Generator | None = 0, n_views: int = 8, config: KinectConfig | None = None
+) -> tuple[list[tuple[str, str, PointCloud]], dict[str, dict]]:
     """The view-database inputs for the four built-in fittings (``semslam db build --builtin``).
 
     Returns

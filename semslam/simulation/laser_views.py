@@ -91,15 +91,21 @@ class LaserViewConfig:
         lo, hi = (float(v) for v in self.altitude_m)
         mount = float(self.scanner.T_vehicle_scanner_xyz_m[2])
         if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi) or lo - mount <= self.scanner.min_range_m:
-            raise SimulationError(f"The 'altitude_m' field of LaserViewConfig must be (low, high) with 0 < low <= high and "
-                                  f"the scanner (mounted {mount:g} m below the vehicle) above its minimum range. "
-                                  f"Got {self.altitude_m!r} instead.")
+            raise SimulationError(
+                f"The 'altitude_m' field of LaserViewConfig must be (low, high) with 0 < low <= high and "
+                f"the scanner (mounted {mount:g} m below the vehicle) above its minimum range. "
+                f"Got {self.altitude_m!r} instead."
+            )
         for name in ("cross_track_m", "speed_mps", "floor_cut_m", "border_margin_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise SimulationError(f"The {name!r} field of LaserViewConfig must be a finite number >= 0. Got {v!r} instead.")
+                raise SimulationError(
+                    f"The {name!r} field of LaserViewConfig must be a finite number >= 0. Got {v!r} instead."
+                )
         if not (0 <= self.along_sweep <= 1):
-            raise SimulationError(f"The 'along_sweep' field of LaserViewConfig must be in [0, 1]. Got {self.along_sweep!r} instead.")
+            raise SimulationError(
+                f"The 'along_sweep' field of LaserViewConfig must be in [0, 1]. Got {self.along_sweep!r} instead."
+            )
         if len(self.roll_pitch_rad) != 2 or not all(0 <= float(v) < math.pi / 4 for v in self.roll_pitch_rad):
             raise SimulationError(f"The 'roll_pitch_rad' field of LaserViewConfig must be two angles in [0, pi/4). "
                                   f"Got {self.roll_pitch_rad!r} instead.")

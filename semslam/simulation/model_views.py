@@ -68,7 +68,9 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
                 if cloud.n_points == 0:
                     raise DatabaseError(f"The Kinect view {k} of the class {label!r} saw no point (distance "
                                         f"{cfg.distance_m:g} m, elevation {math.degrees(cfg.elevation_rad):g} deg).")
-                views.append((label, f"{label}_az{round(np.degrees(az)):03d}" + (f"_rest{rest}" if rest else ""), cloud))
+                views.append(
+                    (label, f"{label}_az{round(np.degrees(az)):03d}" + (f"_rest{rest}" if rest else ""), cloud)
+                )
                 step()
             classes[label] = {"symmetry": model.symmetry, "size_xyz_m": np.array(model.size_xyz_m)}
     return views, classes

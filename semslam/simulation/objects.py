@@ -72,7 +72,9 @@ class ObjectModel:
 
     def __repr__(self) -> str:
         s = ", ".join(f"{v * 1000:.0f}" for v in self.size_xyz_m)
-        return f"ObjectModel({self.label!r}, size_mm=[{s}], symmetry={self.symmetry.kind!r}, faces={len(self.mesh.faces)})"
+        return (
+            f"ObjectModel({self.label!r}, size_mm=[{s}], symmetry={self.symmetry.kind!r}, faces={len(self.mesh.faces)})"
+        )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -109,7 +111,10 @@ def _reducing_tee() -> trimesh.Trimesh:
         _cyl(R, (half - 0.030, 0, 0), (half, 0, 0)),
         _cyl(r_br, (0, 0, 0), (0, branch_top, 0)),
     ]
-    holes = [_cyl(0.0255, (-half - 0.01, 0, 0), (half + 0.01, 0, 0)), _cyl(0.0165, (0, 0, 0), (0, branch_top + 0.01, 0))]
+    holes = [
+        _cyl(0.0255, (-half - 0.01, 0, 0), (half + 0.01, 0, 0)),
+        _cyl(0.0165, (0, 0, 0), (0, branch_top + 0.01, 0)),
+    ]
     return _solid(parts, holes)
 
 
@@ -165,7 +170,12 @@ def _resting(mesh: trimesh.Trimesh, n_max: int = 4) -> tuple[list, np.ndarray]:
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
     num = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c)))
-    den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb + np.einsum("ij,ij->i", b, c) * la
+    den = (
+        la * lb * lc
+        + np.einsum("ij,ij->i", a, b) * lc
+        + np.einsum("ij,ij->i", a, c) * lb
+        + np.einsum("ij,ij->i", b, c) * la
+    )
     omega = 2.0 * np.arctan2(num, den)
     groups = [list(f) for f in hull.facets]
     grouped = {i for g in groups for i in g}
@@ -195,19 +205,29 @@ def _resting(mesh: trimesh.Trimesh, n_max: int = 4) -> tuple[list, np.ndarray]:
     return [poses[i] for i in order], np.asarray(probs)[order]
 
 
-def make_object(label: str, mesh: trimesh.Trimesh, symmetry: Symmetry | None = None, *, centre: bool = True) -> ObjectModel:
+def make_object(
+    label: str, mesh: trimesh.Trimesh, symmetry: Symmetry | None = None, *, centre: bool = True
+) -> ObjectModel:
     """Wrap a mesh (metres) as an :class:`ObjectModel`, computing its size and resting poses.
 
     With ``centre`` the mesh is translated so that its bounding-box centre is the origin (the canonical
     frame's convention); the axes are kept.
     """
     if not isinstance(label, str) or not label or label in ("unknown", "clutter"):
-        raise SimulationError(f"The 'label' argument of make_object must be a non-empty string other than 'unknown'/'clutter'. Got {label!r} instead.")
+        raise SimulationError(
+            f"The 'label' argument of make_object must be a non-empty string other than 'unknown'/'clutter'. Got "
+            f"{label!r} instead."
+        )
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise SimulationError(f"The 'mesh' argument of make_object must be a non-empty trimesh.Trimesh. Got {type(mesh).__name__} instead.")
+        raise SimulationError(
+            f"The 'mesh' argument of make_object must be a non-empty trimesh.Trimesh. Got {type(mesh).__name__} "
+            f"instead."
+        )
     symmetry = Symmetry("none") if symmetry is None else symmetry
     if not isinstance(symmetry, Symmetry):
-        raise SimulationError(f"The 'symmetry' argument of make_object must be a Symmetry or None. Got {type(symmetry).__name__} instead.")
+        raise SimulationError(
+            f"The 'symmetry' argument of make_object must be a Symmetry or None. Got {type(symmetry).__name__} instead."
+        )
     mesh = _centre(mesh) if centre else mesh.copy()
     size = np.ptp(mesh.bounds, axis=0)
     size.setflags(write=False)
@@ -250,7 +270,9 @@ def load_object(path: str | Path, label: str, symmetry: Symmetry | None = None, 
     """
     path = Path(path)
     if not path.is_file():
-        raise SimulationError(f"The 'path' argument of load_object must be an existing mesh file. Got {str(path)!r} (not found) instead.")
+        raise SimulationError(
+            f"The 'path' argument of load_object must be an existing mesh file. Got {str(path)!r} (not found) instead."
+        )
     try:
         mesh = trimesh.load(path, force="mesh")
     except Exception as exc:  # trimesh raises many types on a bad file
@@ -258,7 +280,9 @@ def load_object(path: str | Path, label: str, symmetry: Symmetry | None = None, 
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise SimulationError(f"The mesh file {str(path)!r} must hold triangles. Got none instead.")
     if not (np.isfinite(scale) and scale > 0):
-        raise SimulationError(f"The 'scale' argument of load_object must be a finite number > 0. Got {scale!r} instead.")
+        raise SimulationError(
+            f"The 'scale' argument of load_object must be a finite number > 0. Got {scale!r} instead."
+        )
     mesh = mesh.copy()
     mesh.apply_scale(scale)
     return make_object(label, mesh, symmetry)

@@ -111,11 +111,17 @@ class LaserScanner:
         if T.shape == (4, 4):
             T = np.broadcast_to(T, (cfg.n_lines, 4, 4))
         if T.shape != (cfg.n_lines, 4, 4) or not np.isfinite(T).all():
-            raise SimulationError(f"The 'T_world_scanner_lines' argument of LaserScanner.scan must have shape ({cfg.n_lines}, 4, 4) and be finite. Got {T.shape} instead.")
+            raise SimulationError(
+                f"The 'T_world_scanner_lines' argument of LaserScanner.scan must have shape ({cfg.n_lines}, 4, 4) and "
+                f"be finite. Got {T.shape} instead."
+            )
         n_faces = len(caster.face_normals)
         inst = np.zeros(0, np.int64) if face_instance is None else np.asarray(face_instance)
         if face_instance is not None and (inst.shape != (n_faces,) or not np.issubdtype(inst.dtype, np.integer)):
-            raise SimulationError(f"The 'face_instance' argument of LaserScanner.scan must be an integer array of shape ({n_faces},) (one per scene face). Got {_describe(inst)} instead.")
+            raise SimulationError(
+                f"The 'face_instance' argument of LaserScanner.scan must be an integer array of shape ({n_faces},) "
+                f"(one per scene face). Got {_describe(inst)} instead."
+            )
         inst = inst.astype(np.int64, copy=False)
         R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
         tr = self._trace(caster, R, t)
@@ -160,7 +166,9 @@ class LaserScanner:
         seen[ocand] &= sp.small_unobstructed(co32, cd32, len32)
         return _Trace(tri, t_hit, idx, r_cam, seen)
 
-    def footprint_contains(self, T_world_scanner: np.ndarray, points_world_m: np.ndarray, margin_rad: float = 0.05) -> np.ndarray:
+    def footprint_contains(
+        self, T_world_scanner: np.ndarray, points_world_m: np.ndarray, margin_rad: float = 0.05
+    ) -> np.ndarray:
         """True for each world point inside the laser's swept field of view and range (cheap gating)."""
         T = np.asarray(T_world_scanner, dtype=float)
         p = (np.asarray(points_world_m, dtype=float) - T[:3, 3]) @ T[:3, :3]

@@ -48,7 +48,9 @@ def dvl_beam_ranges(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.
     return 0.5 * (lo + hi)
 
 
-def dvl_beams_over_slope(world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.ndarray, beam_angle_rad: float) -> np.ndarray:
+def dvl_beams_over_slope(
+    world: WorldConfig, position_ned_m: np.ndarray, rpy_rad: np.ndarray, beam_angle_rad: float
+) -> np.ndarray:
     """True where any of the four Janus beams (azimuths 45 + k 90 degrees in the body frame,
     ``beam_angle_rad`` from the body z axis) reaches the floor on a slope (flat-floor approximation)."""
     beams = _beam_directions(position_ned_m, rpy_rad, beam_angle_rad)

@@ -39,7 +39,9 @@ def _streams(seed: int) -> dict[str, np.random.Generator]:
 
 def _check_seed(seed) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise SimulationError(f"The 'seed' argument of simulate_dataset must be a non-negative integer. Got {seed!r} instead.")
+        raise SimulationError(
+            f"The 'seed' argument of simulate_dataset must be a non-negative integer. Got {seed!r} instead."
+        )
     return int(seed)
 
 
@@ -76,12 +78,16 @@ def simulate_dataset(config: SimulatorConfig | None = None, *, seed: int = 0, wi
     Returns
     -------
     Dataset
-        The vehicle description (the simulated sensors' specification), sensor logs, 50 Hz truth, object truths, scan records (``path`` = ``scans/scan_NNNNN.pcd``) and
+        The vehicle description (the simulated sensors' specification), sensor logs, 50 Hz truth, object truths, scan
+        records (``path`` = ``scans/scan_NNNNN.pcd``) and
         the in-memory clouds (``mission.load_scan(scan_id)``, frame ``"scanner"``).
     """
     config = SimulatorConfig() if config is None else config
     if not isinstance(config, SimulatorConfig):
-        raise SimulationError(f"The 'config' argument of simulate_dataset must be a SimulatorConfig or None. Got {type(config).__name__} instead.")
+        raise SimulationError(
+            f"The 'config' argument of simulate_dataset must be a SimulatorConfig or None. Got "
+            f"{type(config).__name__} instead."
+        )
     seed = _check_seed(seed)
     scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_dataset")
     rngs = _streams(seed)
@@ -149,7 +155,9 @@ def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, confi
                 continue
             stamps = scanner.line_stamps(starts[k])
             T_lines = traj.sample(stamps).T_world_vehicle() @ T_vs
-            result = scanner.scan(caster, T_lines, seed=scan_rng, face_instance=world.face_instance, line_stamps_s=stamps)
+            result = scanner.scan(
+                caster, T_lines, seed=scan_rng, face_instance=world.face_instance, line_stamps_s=stamps
+            )
             scan_id = len(records)
             records.append(ScanRecord(scan_id, float(stamps[0]), float(stamps[-1]), f"scans/scan_{scan_id:05d}.pcd",
                                       result.cloud.n_points))
@@ -157,7 +165,9 @@ def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, confi
     return records, clouds
 
 
-def T_world_scanner_at(mission_truth: VehicleTruth, T_vehicle_scanner: RigidTransform, stamp_s: float) -> RigidTransform:
+def T_world_scanner_at(
+    mission_truth: VehicleTruth, T_vehicle_scanner: RigidTransform, stamp_s: float
+) -> RigidTransform:
     """Ground-truth scanner pose at a stamp (nearest truth sample's attitude, interpolated position)."""
     i = int(np.clip(np.searchsorted(mission_truth.stamp_s, stamp_s), 0, len(mission_truth.stamp_s) - 1))
     pos = mission_truth.interpolate_position(stamp_s)[0]

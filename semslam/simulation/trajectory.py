@@ -71,7 +71,9 @@ class Trajectory:
 
         c = np.asarray(corners_ne_m, dtype=float)
         if c.ndim != 2 or c.shape[1] != 2 or len(c) < 3:
-            raise SimulationError(f"The 'corners_ne_m' argument of Trajectory must have shape (K >= 3, 2). Got {c.shape} instead.")
+            raise SimulationError(
+                f"The 'corners_ne_m' argument of Trajectory must have shape (K >= 3, 2). Got {c.shape} instead."
+            )
         self.config = config
         self.floor_depth_m = float(floor_depth_m)
         rng = as_rng(seed, caller="Trajectory")
@@ -96,7 +98,9 @@ class Trajectory:
         cut = radius * np.tan(np.abs(turn) / 2)  # tangent length at each corner
         cut_prev = np.roll(cut, 1)
         if np.any(cut + cut_prev >= lengths):
-            raise SimulationError(f"The 'corner_radius_m' of TrajectoryConfig ({radius}) is too large for edges of {lengths.min():.2f} m.")
+            raise SimulationError(
+                f"The 'corner_radius_m' of TrajectoryConfig ({radius}) is too large for edges of {lengths.min():.2f} m."
+            )
         segs = []  # (kind, start_s, length, data)
         s = 0.0
         for i in range(k):
@@ -170,7 +174,10 @@ class Trajectory:
             v = np.where(down, V * td / Ta, v)
         if cfg.speed_wander_mps > 0:
             dv, ds = _sines(t, _WANDER_PERIODS_S, _WANDER_WEIGHTS, self._wander_phase, cfg.speed_wander_mps)
-            ds = ds - _sines(np.zeros(1), _WANDER_PERIODS_S, _WANDER_WEIGHTS, self._wander_phase, cfg.speed_wander_mps)[1]
+            ds = (
+                ds
+                - _sines(np.zeros(1), _WANDER_PERIODS_S, _WANDER_WEIGHTS, self._wander_phase, cfg.speed_wander_mps)[1]
+            )
             g, dg = self._envelope(t)
             s = s + g * ds
             v = v + dg * ds + g * dv

@@ -146,7 +146,9 @@ def build_world(config: WorldConfig, models: dict[str, ObjectModel], *, seed: in
                 T_rest = np.eye(4)
                 T_rest[2, 3] = -mesh.bounds[0, 2]
             T = _T_world_rest(n, e, float(floor_depth_m(config, n, e)), rng.uniform(-np.pi, np.pi)) @ T_rest
-            truths.append(ObjectTruth(name=f"clutter_{k}", label="clutter", T_world_object=RigidTransform(T), in_database=False))
+            truths.append(
+                ObjectTruth(name=f"clutter_{k}", label="clutter", T_world_object=RigidTransform(T), in_database=False)
+            )
             meshes.append(mesh.apply_transform(T))
             placed = np.vstack([placed, (n, e)])
     tank = tank_mesh(config)

@@ -77,7 +77,10 @@ class SemanticEkf(CompressedState):
         self.dvl_bias_tau_s = float(dvl_bias_tau_s)
         P0 = np.asarray(P0_vehicle, dtype=float)
         if P0.shape != (self.n_v, self.n_v):
-            raise SlamError(f"The 'P0_vehicle' argument of SemanticEkf must have shape ({self.n_v}, {self.n_v}). Got {P0.shape} instead.")
+            raise SlamError(
+                f"The 'P0_vehicle' argument of SemanticEkf must have shape ({self.n_v}, {self.n_v}). Got {P0.shape} "
+                f"instead."
+            )
         self.x = np.zeros(self.n_v)
         self.x[0:3] = position_ned_m
         self.x[3:6] = velocity_body_mps
@@ -132,9 +135,11 @@ class SemanticEkf(CompressedState):
             return np.arange(self.i_dvl, self.i_dvl + 8)
         if block == "yaw_bias" and self.yaw_bias:
             return np.array([self.i_yaw])
-        raise SlamError(f"The 'block' argument of SemanticEkf.indices must be one of position, velocity"
-                        f"{', dvl_calibration' if self.dvl_calibration else ''}{', yaw_bias' if self.yaw_bias else ''}. "
-                        f"Got {block!r} instead.")
+        raise SlamError(
+            f"The 'block' argument of SemanticEkf.indices must be one of position, velocity"
+            f"{', dvl_calibration' if self.dvl_calibration else ''}{', yaw_bias' if self.yaw_bias else ''}. "
+            f"Got {block!r} instead."
+        )
 
     @property
     def position_ned_m(self) -> np.ndarray:
@@ -202,8 +207,16 @@ class SemanticEkf(CompressedState):
         return kern.rot_z(-float(self.xa[self.i_yaw])) @ R_wv_ahrs
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, dt_s: float, R_wv_ahrs: np.ndarray, *, velocity_rw,
-                attitude_cov_world: np.ndarray | None = None, yaw_bias_rw: float = 0.0, dvl_on_slope: bool = False) -> None:
+    def predict(
+        self,
+        dt_s: float,
+        R_wv_ahrs: np.ndarray,
+        *,
+        velocity_rw,
+        attitude_cov_world: np.ndarray | None = None,
+        yaw_bias_rw: float = 0.0,
+        dvl_on_slope: bool = False,
+    ) -> None:
         """Constant-velocity prediction over ``dt_s`` with the AHRS attitude as input.
 
         ``p += R v dt``, ``v`` constant, landmarks static. Process noise: white acceleration of spectral

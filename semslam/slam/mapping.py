@@ -52,8 +52,12 @@ class ObjectMapper:
                  T_vehicle_scanner: RigidTransform, log: Callable[..., None]) -> None:
         self.ekf, self.cfg, self.sym, self.T_vs, self._log = ekf, cfg, symmetries, T_vehicle_scanner, log
         self.test = "position" if mode == "position" else "pose"
-        self.consensus = ConsensusInitializer(cfg.initialisation.consensus_position_m, cfg.initialisation.consensus_attitude,
-                                              cfg.initialisation.consensus_min_observations, cfg.initialisation.consensus_max_age_s)
+        self.consensus = ConsensusInitializer(
+            cfg.initialisation.consensus_position_m,
+            cfg.initialisation.consensus_attitude,
+            cfg.initialisation.consensus_min_observations,
+            cfg.initialisation.consensus_max_age_s,
+        )
         gate = GateThresholds(cfg.gating.gate_probability)
         self._thr = {d: gate.threshold(d) for d in range(1, 7)}
         self._thr_create = max(self._thr[3], GateThresholds(cfg.gating.creation_gate_probability).threshold(3))

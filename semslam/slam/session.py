@@ -93,7 +93,9 @@ class SlamSession:
                             f"{type(vehicle).__name__} instead.")
         cfg = SlamConfig() if config is None else config
         if not isinstance(cfg, SlamConfig):
-            raise SlamError(f"The 'config' argument of SlamSession must be a SlamConfig. Got {type(cfg).__name__} instead.")
+            raise SlamError(
+                f"The 'config' argument of SlamSession must be a SlamConfig. Got {type(cfg).__name__} instead."
+            )
         self.vehicle, self.cfg, self.mode = vehicle, cfg, mode
         self._used: dict = {}
         if start is not None:
@@ -106,7 +108,9 @@ class SlamSession:
             initial_velocity_body_mps, initial_position_cov_m2 = start.velocity_body_mps, start.position_cov_m2
             self._used = dict(start.used_stamps_s)
         self.symmetries = dict(symmetries or {})
-        self._p0 = as_float_array("initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError)
+        self._p0 = as_float_array(
+            "initial_position_ned_m", initial_position_ned_m, (3,), caller="SlamSession", error=SlamError
+        )
         self._P0p = check_initial_position_cov(initial_position_cov_m2)
         self._v_known = initial_velocity_body_mps is not None
         self._v0 = np.zeros(3) if not self._v_known else as_float_array(
@@ -224,8 +228,13 @@ class SlamSession:
         t = self._stamp("dvl", stamp_s)
         v = as_float_array("velocity_mps", velocity_mps, (3,), caller="SlamSession.add_dvl", error=SlamError,
                            finite=bool(valid))
-        r = None if beam_range_m is None else as_float_array("beam_range_m", beam_range_m, (None,),
-                                                             caller="SlamSession.add_dvl", error=SlamError, finite=False)
+        r = (
+            None
+            if beam_range_m is None
+            else as_float_array(
+                "beam_range_m", beam_range_m, (None,), caller="SlamSession.add_dvl", error=SlamError, finite=False
+            )
+        )
         self._t_end = max(self._t_end, t)
         if valid and not all(LIMITS["nav.dvl_velocity_mps"].contains(float(x)) for x in v):
             self._implausible["dvl"] += 1  # a corrupt record: after 5 in a row the sensor gate would accept them
@@ -290,7 +299,9 @@ class SlamSession:
                 continue
             self._history_before(t)
             self._predict_to(t)
-            if self.ekf.heading_constrained and (self._was_unaided or t - self._last_dvl_s > self.cfg.motion.unaided_after_s):
+            if self.ekf.heading_constrained and (
+                self._was_unaided or t - self._last_dvl_s > self.cfg.motion.unaided_after_s
+            ):
                 self._was_unaided = True
                 # unaided, the velocity the null direction was propagated with may have been far off: re-anchor it
                 # on the current estimate (a rotation about the vehicle now; the launch prior is not a measurement)

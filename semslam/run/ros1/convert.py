@@ -79,8 +79,14 @@ def odometry_spec(stamp_s: float, position_ned_m: Any, position_cov_m2: Any, rpy
     twist_cov[:3, :3] = B @ np.asarray(velocity_cov_frd, float).reshape(3, 3) @ B.T
     twist_cov[3:, 3:] = np.eye(3) * UNKNOWN_VARIANCE
     R = rotation_from_rpy(*np.asarray(rpy_ned_frd_rad, float))
-    return OdometrySpec(float(stamp_s), C @ np.asarray(position_ned_m, float), quat_xyzw_from_R_world_ned_vehicle_frd(R),
-                        pose_cov, B @ np.asarray(velocity_frd_mps, float), twist_cov)
+    return OdometrySpec(
+        float(stamp_s),
+        C @ np.asarray(position_ned_m, float),
+        quat_xyzw_from_R_world_ned_vehicle_frd(R),
+        pose_cov,
+        B @ np.asarray(velocity_frd_mps, float),
+        twist_cov,
+    )
 
 
 def quat_xyzw_from_axes(axes: np.ndarray) -> np.ndarray:

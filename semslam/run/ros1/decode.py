@@ -32,7 +32,8 @@ _ACCEPTED = {"scans": SCAN_TYPES, "attitude": ATTITUDE_TYPES, "dvl": TWIST_TYPES
 class LiveMessage:
     """A decoded message: stamp (header stamp, else the receive time; integer ns), kind and payload as
     :func:`semslam.dataset.rosbag.stream_bag` yields them (attitude rpy (3,), dvl (velocity FRD, valid,
-    ranges), depth m, fix (latitude, longitude, height, covariance NE, "gps"/"usbl"), scan :class:`~semslam.io.ros.PointCloud2Data`)."""
+    ranges), depth m, fix (latitude, longitude, height, covariance NE, "gps"/"usbl"), scan
+    :class:`~semslam.io.ros.PointCloud2Data`)."""
 
     stamp_ns: int
     kind: str
@@ -86,9 +87,11 @@ class LiveDecoder:
         accepted = _ACCEPTED[field]
         vendor_dvl = field == "dvl" and any(name == "velocity" for name, _ in store.fielddefs[msgtype][1])
         if msgtype not in accepted and not vendor_dvl:
-            raise BagError(f"Topic '{topic}' (topics.{field} of the topic map) must have type "
-                           f"{' or '.join(accepted)}{' or a vendor DVL message with a velocity field' if field == 'dvl' else ''}. "
-                           f"Got {msgtype} instead.")
+            raise BagError(
+                f"Topic '{topic}' (topics.{field} of the topic map) must have type "
+                f"{' or '.join(accepted)}{' or a vendor DVL message with a velocity field' if field == 'dvl' else ''}. "
+                f"Got {msgtype} instead."
+            )
         self._stores[key] = store
         return store
 

@@ -97,12 +97,28 @@ class LiveSlam:
         however late (replays that must give the offline result; use a large ``max_hold_s``).
     """
 
-    def __init__(self, vehicle, recognizer=None, *, mode: str = "pose", modes=None, config=None, symmetries=None,
-                 backend: str = "ekf", survey=None, seed: int = 0, keep_unreliable: bool = False,
-                 up_from_attitude: bool = False, geodetic_origin=None, reorder_window_s: float = 0.5, max_hold_s: float = 5.0,
-                 scan_queue: str = "newest", on_estimate: Callable[["LiveSlam"], None] | None = None,
-                 on_prediction: Callable[["LiveSlam", "Prediction"], None] | None = None,
-                 on_detections: Callable[[ScanJob, Any, float], None] | None = None) -> None:
+    def __init__(
+        self,
+        vehicle,
+        recognizer=None,
+        *,
+        mode: str = "pose",
+        modes=None,
+        config=None,
+        symmetries=None,
+        backend: str = "ekf",
+        survey=None,
+        seed: int = 0,
+        keep_unreliable: bool = False,
+        up_from_attitude: bool = False,
+        geodetic_origin=None,
+        reorder_window_s: float = 0.5,
+        max_hold_s: float = 5.0,
+        scan_queue: str = "newest",
+        on_estimate: Callable[["LiveSlam"], None] | None = None,
+        on_prediction: Callable[["LiveSlam", "Prediction"], None] | None = None,
+        on_detections: Callable[[ScanJob, Any, float], None] | None = None,
+    ) -> None:
         from ..runner import Runner
 
         modes = (mode,) if modes is None else tuple(modes)

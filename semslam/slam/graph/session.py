@@ -47,10 +47,14 @@ class GraphSession(SlamSession):
 
     def __init__(self, vehicle, *, backend: str = "isam2", huber_k: float | None = None, **kw) -> None:
         if backend not in BACKENDS:
-            raise SlamError(f"The 'backend' argument of GraphSession must be one of {BACKENDS}. Got {backend!r} instead.")
+            raise SlamError(
+                f"The 'backend' argument of GraphSession must be one of {BACKENDS}. Got {backend!r} instead."
+            )
         if huber_k is not None and (isinstance(huber_k, bool) or not isinstance(huber_k, (int, float))
                                     or not np.isfinite(huber_k) or huber_k <= 0):
-            raise SlamError(f"The 'huber_k' argument of GraphSession must be a number > 0 or None. Got {huber_k!r} instead.")
+            raise SlamError(
+                f"The 'huber_k' argument of GraphSession must be a number > 0 or None. Got {huber_k!r} instead."
+            )
         super().__init__(vehicle, **kw)
         self.backend_name, self.huber_k = backend, huber_k
         self.graph: GraphBackend | None = None
@@ -158,13 +162,24 @@ class GraphSession(SlamSession):
         K = len(self._hist_keys)
         ups = np.asarray(g.update_s) if g.update_s else np.zeros(1)
         dur = base.metrics.get("duration_s", 0.0)
-        metrics = dict(base.metrics, backend=self.backend_name,
-                       graph={"backend": self.backend_name, "n_keyframes": len(g.kf_t), "n_factors": g.n_factors,
-                              "n_landmarks": g.n_landmarks, "n_updates": int(len(g.update_s)),
-                              "batch_iterations": g.iterations, "detection_factors_relinearized": g.n_relinearized,
-                              "update_mean_s": float(ups.mean()), "update_max_s": float(ups.max()),
-                              "wall_s": self._wall, "real_time_factor": dur / self._wall if self._wall > 0 else float("inf"),
-                              "huber_k": self.huber_k})
+        metrics = dict(
+            base.metrics,
+            backend=self.backend_name,
+            graph={
+                "backend": self.backend_name,
+                "n_keyframes": len(g.kf_t),
+                "n_factors": g.n_factors,
+                "n_landmarks": g.n_landmarks,
+                "n_updates": int(len(g.update_s)),
+                "batch_iterations": g.iterations,
+                "detection_factors_relinearized": g.n_relinearized,
+                "update_mean_s": float(ups.mean()),
+                "update_max_s": float(ups.max()),
+                "wall_s": self._wall,
+                "real_time_factor": dur / self._wall if self._wall > 0 else float("inf"),
+                "huber_k": self.huber_k,
+            },
+        )
         metrics["smoother"] = {"status": f"graph ({self.backend_name})"}  # evaluate_run adds its ATE and NEES
         arr = lambda H, k, s: np.asarray(H[k]).reshape(s)  # noqa: E731
         return replace(base, position_ned_m=arr(on, "p", (K, 3)), position_cov_m2=arr(on, "Pp", (K, 3, 3)),
