@@ -28,7 +28,7 @@ WEIGHTS = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 2.0, 2.0, 2.0], dtype=np.
 
 
 # ---------------------------------------------------------------- ESF
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vox(v):  # pragma: no cover - compiled
     if v < F0:
         return math.floor(v) + GRID_H
@@ -97,7 +97,7 @@ def _flat(x, y, z):  # pragma: no cover - compiled
     return ((x + 1) * PAD + (y + 1)) * PAD + (z + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lci(lut, x1, y1, z1, x2, y2, z2):  # pragma: no cover - compiled
     """PCL's 3-D Bresenham line test: (n_in, n_visited), the occupied and visited voxels of the line.
 
@@ -152,7 +152,7 @@ def _line_class(inside, count):  # pragma: no cover - compiled
     return 2, np.float32(inside) / np.float32(count)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _round(x):  # pragma: no cover - compiled
     """pcl_round for float32 x >= 0 (half away from zero); -1 for NaN."""
     if x != x:
@@ -160,22 +160,22 @@ def _round(x):  # pragma: no cover - compiled
     return math.floor(x + F05)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _angle_bin(c):  # pragma: no cover - compiled
     return _round(np.float32(math.acos(abs(c))) / PIH * F63)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _norm4(x, y, z):  # pragma: no cover - compiled
     return np.sqrt((x * x + z * z) + y * y)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dot4(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
     return (ax * bx + az * bz) + ay * by
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dist(px, py, pz, qx, qy, qz):  # pragma: no cover - compiled
     dx = qx - px
     dy = qy - py

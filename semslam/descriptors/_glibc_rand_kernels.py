@@ -8,7 +8,7 @@ from numba import njit
 
 
 # ---------------------------------------------------------------- glibc rand() (TYPE_3)
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def glibc_srand(seed):  # pragma: no cover - compiled
     """State of glibc's ``random_r`` after ``srand(seed)`` and its 310 discarded outputs.
 
@@ -44,7 +44,7 @@ def glibc_srand(seed):  # pragma: no cover - compiled
     return state
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def glibc_rand_fill(state, out):  # pragma: no cover - compiled
     """Fill ``out`` (int64) with the next ``rand()`` outputs, advancing ``state`` in place."""
     i = state[31]

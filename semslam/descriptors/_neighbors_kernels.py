@@ -25,7 +25,7 @@ DIRECT_CELLS_PER_AXIS = float(1 << 20)
 MAX_ABS_CELLS = float(1 << 52)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bucket(points, origin, cell_m):  # pragma: no cover - compiled
     """Sort the points by grid cell (stable: by index within a cell).
 
@@ -85,7 +85,7 @@ def _bucket(points, origin, cell_m):  # pragma: no cover - compiled
     return order, skeys, spts, scells, start, dims
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _compressed_cells(points, origin, cell_m, cells, dims):  # pragma: no cover - compiled
     """Cells of a cloud spanning too many cells for packed keys (one point at 1e9 m): absolute cell
     coordinates ``floor(p / cell_m)`` (precise near 0 whatever the outliers), then on each axis the
@@ -155,7 +155,7 @@ def grid_bucket_count(points, origin, cell_m, radius_m):  # pragma: no cover - c
     return grid, _count(*grid, radius_m)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _count(order, skeys, spts, scells, start, dims, radius_m):  # pragma: no cover - compiled
     """Number of points closer than ``radius_m`` to each point (itself included), shape (N,)."""
     n = order.shape[0]
@@ -253,7 +253,7 @@ def grid_fill(order, skeys, spts, scells, start, dims, radius_m, max_nn, indptr,
         s0 = s1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sort_rows(indptr, indices, sqdist):  # pragma: no cover - compiled
     """Sort every CSR row in place by increasing squared distance, then index (insertion sort:
     rows are short)."""

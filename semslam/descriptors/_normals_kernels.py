@@ -44,7 +44,7 @@ def _rotate(a, v, p, q, r):  # pragma: no cover - compiled
         v[k, q] = s * vkp + c * vkq
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _jacobi_eigh3(a, v):  # pragma: no cover - compiled
     """Eigen-decompose the symmetric 3x3 ``a`` in place by cyclic Jacobi rotations: eigenvalues
     end on its diagonal, the eigenvectors in the columns of ``v`` (set to identity first).

@@ -80,7 +80,7 @@ def _bin(value, nbins):  # pragma: no cover - compiled
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def spfh(points, normals, indptr, indices, valid, skip_invalid):  # pragma: no cover - compiled
     """SPFH (N, 33) of every point over its CSR neighbourhood (which contains the point itself).
 
@@ -120,7 +120,7 @@ def _add_pair(out, i, f1, f2, f3, incr):  # pragma: no cover - compiled
     out[i, 2 * N_BINS + _bin(N_BINS * ((f3 + 1.0) * 0.5), N_BINS)] += incr
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def spfh_symmetric(points, normals, indptr, indices, valid, skip_invalid):  # pragma: no cover
     """:func:`spfh` for symmetric neighbourhoods (j in row i <=> i in row j, as radius searches):
     each pair's features are computed once and binned into both rows, unless the swap test ties
@@ -161,7 +161,7 @@ def _add_pair_both(out, points, normals, i, j, incr):  # pragma: no cover - comp
     _add_pair(out, j, f1, f2, f3, incr[j])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fpfh_from_spfh(spfh_hist, indptr, indices, sqdist):  # pragma: no cover - compiled
     """FPFH (N, 33): for each point, sum of its neighbours' SPFH weighted by 1/d^2 (neighbours at
     distance 0, the point itself included, are skipped; the point's own SPFH is not added), then each

@@ -133,7 +133,7 @@ def vfh_f32(points, normals, valid, viewpoint, legacy_f23, pcl_4d, normalize_bin
     return _vfh_add_viewpoint(out, normals, valid, viewpoint, centroid, pcl_4d, incr_vp)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vfh_centroid_f32(points):  # pragma: no cover - compiled
     """PCL ``compute3DCentroid`` (w = 1) of (N, 3) float32 points: float sum in point order / N, (3,) float32."""
     n_all = points.shape[0]
@@ -152,7 +152,7 @@ def _vfh_centroid_f32(points):  # pragma: no cover - compiled
     return centroid
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vfh_mean_normal_f32(normals, valid):  # pragma: no cover - compiled
     """Float sum of the valid normals in point order / their count n, not re-normalised: ((3,) float32, n)."""
     mnx = _F32_ZERO
@@ -173,7 +173,7 @@ def _vfh_mean_normal_f32(normals, valid):  # pragma: no cover - compiled
     return mean_normal, n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vfh_max_distance_f32(points, centroid, pcl_4d):  # pragma: no cover - compiled
     """VFH's distance normaliser dmax (double from float32): pcl::getMaxDistance, the first point of largest
     Vector3f norm ((x^2 + y^2) + z^2) of (centroid - point), then the norm of (centroid - that point) as a
@@ -197,7 +197,7 @@ def _vfh_max_distance_f32(points, centroid, pcl_4d):  # pragma: no cover - compi
     return float(math.sqrt(_dot3_f32(ex, ey, ez, ex, ey, ez)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vfh_add_viewpoint(out, normals, valid, viewpoint, centroid, pcl_4d, incr_vp):  # pragma: no cover - compiled
     """The 128 viewpoint bins of :func:`vfh_f32`: 0, or 2 (nothing added) when the direction is zero."""
     one = np.float32(1.0)

@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def selected_input_indices(cluster_voxels, n_voxels, point_voxel):
     """Sorted indices i of the input points whose voxel ``point_voxel[i]`` is one of ``cluster_voxels`` (int64).
 

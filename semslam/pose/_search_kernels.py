@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_nearest(q0, q1, q2, origin, inv_cell, nx, ny, nz, nearest):
     """(found, x, y, z) of the nearest model point of the cell of (q0, q1, q2); ``origin`` (5,) is the grid
     origin, the cell and the quantum."""
@@ -33,7 +33,7 @@ def _cell_nearest(q0, q1, q2, origin, inv_cell, nx, ny, nz, nearest):
             origin[2] + (k + 0.5) * c + nearest[i, j, k, 2] * qm)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def field_nearest(points, params, nearest):
     """Stored nearest model point (N, 3) of each point's cell, NaN outside the field."""
     nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
@@ -46,7 +46,7 @@ def field_nearest(points, params, nearest):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     """Translation-only alignment of every hypothesis, then its fit cost.
 
@@ -98,7 +98,7 @@ def _lookup(p0, p1, p2, o0, o1, o2, inv, nx, ny, nz, flat, cx, cy, cz, qv):
     return 1, cx[i] + qv[a0 + 128], cy[j] + qv[flat[b + 1] + 128], cz[k] + qv[flat[b + 2] + 128]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv, truncations, tau_m):
     """:func:`align_and_score` of one hypothesis (``t`` (3,) updated in place)."""
     N = src.shape[0]
@@ -143,7 +143,7 @@ def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz
     return c / N
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m, unseen_bad,
                     occluder_min):
     """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
@@ -220,7 +220,7 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def grid_nearest(points, model_pts, origin, inv_cell, dims, cell_start, cell_points, bound):
     """Exact nearest model point within ``bound`` of each point (N,): distance (inf beyond) and index
     (``len(model_pts)`` beyond), as ``cKDTree.query(points, k=1, distance_upper_bound=bound)`` returns them
@@ -285,7 +285,7 @@ def grid_nearest(points, model_pts, origin, inv_cell, dims, cell_start, cell_poi
     return dist, idx
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def range_image(ij, rng, nu, nv, dilate):
     """Smallest range (nu, nv) over the (2 dilate + 1)^2 cells around each cell (inf where none): the
     scatter-min of ``rng`` (N,) at the cells ``ij`` (N, 2) followed by a min-dilation, in one pass."""

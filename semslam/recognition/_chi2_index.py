@@ -62,7 +62,7 @@ def chi2_exact(a, b):  # pragma: no cover - compiled
     return acc
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, nogil=True, fastmath=_FAST)
 def chi2_approx(q, x, start):  # pragma: no cover - compiled
     """``start + d(q, x)`` (``x`` float32 or float64, widened exactly) to ~1e-15 relative: for bounds only."""
     acc = 0.0
@@ -74,7 +74,7 @@ def chi2_approx(q, x, start):  # pragma: no cover - compiled
     return start + acc
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, nogil=True, fastmath=_FAST)
 def chi2_approx_abandon(q, Xb, pos, start, limit):  # pragma: no cover - compiled
     """``start + d(q, row pos)`` to ~1e-15 relative, for bounds only, or a partial sum > ``limit`` as soon as one
     exceeds it. ``Xb`` (n_blocks, m, _STRIDE) holds the rows block-major (float32 or float64, widened
@@ -127,7 +127,7 @@ def _skip(bound, tau, scale):  # pragma: no cover - compiled
     return bound > tau + BOUND_MARGIN * scale + ABS_MARGIN
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _knn_one(q, X, active, offset_bins, Xb, centers, radius, ptr, members, member_rho, best_d,
              best_i):  # pragma: no cover - compiled
     """k = len(best_d) nearest rows of ``X`` to ``q`` into ``best_d``/``best_i`` (see the module docstring);
@@ -189,7 +189,7 @@ def _knn_one(q, X, active, offset_bins, Xb, centers, radius, ptr, members, membe
     return n_bounded
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def knn_query(Q, X, active, offset_bins, Xb, centers, radius, ptr, members, member_rho, k):  # pragma: no cover
     """k nearest rows of ``X`` (m, d) to every row of ``Q`` (n, d): distances (n, k) ascending, rows (n, k)
     and the number of rows bounded per query (n,). Parallel over the queries."""
@@ -203,7 +203,7 @@ def knn_query(Q, X, active, offset_bins, Xb, centers, radius, ptr, members, memb
     return out_d, out_i, n_bounded
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def knn_query_serial(Q, X, active, offset_bins, Xb, centers, radius, ptr, members, member_rho,
                      k):  # pragma: no cover - compiled
     """:func:`knn_query` on one thread (one query: no parallel-region start-up)."""
@@ -217,7 +217,7 @@ def knn_query_serial(Q, X, active, offset_bins, Xb, centers, radius, ptr, member
     return out_d, out_i, n_bounded
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _rho_to_centers(Xb, centers, labels):  # pragma: no cover - compiled
     """``rho(Xb[j], centers[labels[j]])`` (float64 arithmetic, sequential sums)."""
     out = np.empty(Xb.shape[0])
@@ -234,7 +234,7 @@ def _rho_to_centers(Xb, centers, labels):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cluster_sums(S, labels, n_clusters):  # pragma: no cover - compiled
     """Per-cluster sums of the rows of ``S`` (float64) and member counts."""
     sums = np.zeros((n_clusters, S.shape[1]))
@@ -256,7 +256,7 @@ def _nearest_center(S: np.ndarray, C: np.ndarray) -> np.ndarray:
     return labels
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, nogil=True, fastmath=_FAST)
 def _kmeanspp_seeds(S, n_seeds, first, u):  # pragma: no cover - compiled
     """k-means++ seeding of the rows of ``S`` (float32): row indices (<= n_seeds; fewer when the rows run out
     of distinct values). ``u`` (n_seeds,) uniform [0, 1) draws pick each next seed."""

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def chi2_distance_matrix(X: np.ndarray, Y: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """Distances between the rows of ``X`` (n, d) and ``Y`` (m, d): an (n, m) float64 array.
 

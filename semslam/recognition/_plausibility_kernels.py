@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def scan_angular_extent(points, viewpoint):
     """Same result as :func:`semslam.recognition.plausibility.scan_angular_extent` (4,) in one pass.
 
@@ -50,7 +50,7 @@ def scan_angular_extent(points, viewpoint):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mean_and_scatter(points):
     """Mean (3,) of the points (N, 3), N >= 1, and their scatter matrix sum (p - mean)(p - mean)^T (3, 3)."""
     n = points.shape[0]
@@ -77,7 +77,7 @@ def mean_and_scatter(points):
     return mean, s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def projected_extent(points, mean, axes):
     """Max minus min (3,) of the centred points (N, 3), N >= 1, projected on the columns of ``axes`` (3, 3)."""
     lo = np.full(3, np.inf)

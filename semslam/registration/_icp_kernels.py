@@ -58,7 +58,7 @@ def icp_pcl(src: np.ndarray, tree: cKDTree, T0: np.ndarray, max_corr: float, max
     return T, max_iterations, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair):
     """Correspondence of every source point under ``T`` (row of the target point or -1) in ``pair``; returns
     the number of pairs."""
@@ -94,7 +94,7 @@ def _pairs(src, T, params, index, model_pts, model_nrm, mc2, pair):
     return n_pairs
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _plane_error(src, T, model_pts, model_nrm, pair):
     """small_gicp's point-to-plane error of the pairs ``pair`` under ``T``: ``sum 0.5 |n * (q - T s)|^2``
     (element-wise product with the target normal)."""
@@ -110,7 +110,7 @@ def _plane_error(src, T, model_pts, model_nrm, pair):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _plane_normal_equations(src, T, model_pts, model_nrm, pair, H, g, J):
     """The Gauss-Newton system of the point-to-plane error of the pairs ``pair`` under ``T`` (right perturbation
     ``(phi, rho)``, see :func:`icp_plane_field`): ``H`` (6, 6) = sum J^T J and ``g`` (6,) = sum J^T r written in
@@ -143,7 +143,7 @@ def _plane_normal_equations(src, T, model_pts, model_nrm, pair, H, g, J):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_iterations, rot_eps, trans_eps):
     """Point-to-plane ICP with correspondences from a precomputed nearest-point grid.
 
@@ -204,7 +204,7 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
     return T, it, converged, n_pairs
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def icp_plane_field_batch(src, T0s, params, index, model_pts, model_nrm, max_corr, max_iterations, rot_eps,
                           trans_eps):
     """:func:`icp_plane_field` from each of ``T0s`` (H, 4, 4), the runs spread over the cores (independent:
@@ -225,7 +225,7 @@ def icp_plane_field_batch(src, T0s, params, index, model_pts, model_nrm, max_cor
     return Ts, its, conv, n_pairs
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _solve_spd6(A, g, out):
     """``out = -A^-1 g`` for a symmetric positive definite 6x6 ``A`` by Cholesky (``A`` overwritten by its
     factor); False (``out`` undefined) when a pivot is not positive."""
@@ -255,7 +255,7 @@ def _solve_spd6(A, g, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _matmul44(A, B, out):
     """``out = A @ B`` for 4x4 rigid transforms (last rows [0 0 0 1])."""
     for i in range(3):
@@ -266,7 +266,7 @@ def _matmul44(A, B, out):
     out[3, 3] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _exp_se3_into(delta, T):
     """``Exp`` of ``delta = (phi, rho)`` (rotation vector, then translation; Rodrigues and the SE(3) V matrix)
     written into ``T`` (4, 4) without allocations."""

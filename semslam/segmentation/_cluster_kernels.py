@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _find(parent, i):
     root = i
     while parent[root] != root:
@@ -28,7 +28,7 @@ def _find(parent, i):
     return root
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _union(parent, a, b):
     ra = _find(parent, a)
     rb = _find(parent, b)
@@ -40,7 +40,7 @@ def _union(parent, a, b):
         parent[ra] = rb
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_boxes(points, order, cell_start):
     """Axis-aligned bounding box (M, 6) = (min xyz, max xyz) of the points of each cell."""
     m = cell_start.shape[0] - 1
@@ -62,7 +62,7 @@ def _cell_boxes(points, order, cell_start):
 _N_ROWS = 13
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     """Component label (the smallest cell index of the component) of each cell.
 
@@ -125,7 +125,7 @@ def grid_components(points, order, cell_keys, cell_start, nx, ny, tol):
     return roots
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _neighbour_rows(nx, ny):
     """The 13 neighbour rows (dy, dz) of :func:`grid_components` that can hold larger keys (dz > 0, or
     dz == 0 and dy >= 0): key offsets ``nx * (dy + ny * dz)`` (13,) int64, dy (13,) and dz (13,)."""
@@ -177,7 +177,7 @@ def _cells_touch(points, order, cell_start, a, b, tol2):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pair_components(n, pairs):
     """Component root of each of ``n`` nodes given an (E, 2) int64 edge list (union-find)."""
     parent = np.arange(n)
@@ -189,7 +189,7 @@ def pair_components(n, pairs):
     return roots
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _radix_argsort(keys, max_key):
     """Stable argsort (N,) int64 of non-negative int64 ``keys`` <= ``max_key`` (LSD radix sort on
     11-bit digits). A copy of ``_voxel_kernels.radix_argsort``: numba's on-disk cache does not
@@ -220,7 +220,7 @@ def _radix_argsort(keys, max_key):
     return order, k_cur
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_labels(points, cell, tol):
     """Connected-component labels (N,) int64 of the points under "distance < tol", numbered by the
     smallest point index of each component, by the grid union-find (:func:`grid_components`) with
@@ -266,7 +266,7 @@ def grid_labels(points, cell, tol):
     return True, first_occurrence_labels(roots, point_cell)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def first_occurrence_labels(roots, point_node):
     """Label (N,) of each point: its node's root ``roots[point_node[i]]`` renumbered 0, 1, ... in
     order of first occurrence over the points (the component of point 0 is 0, ...)."""
@@ -285,7 +285,7 @@ def first_occurrence_labels(roots, point_node):
     return labels
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def clusters_from_labels(labels, min_size, max_size):
     """Members of the clusters of size in [min_size, max_size] (max_size < 0: no limit), largest
     first (ties: smaller label first), indices ascending within each: flat members (K,) int64 and

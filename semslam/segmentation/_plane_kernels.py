@@ -18,7 +18,7 @@ _S27 = np.uint64(27)
 _S31 = np.uint64(31)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _splitmix64(state):
     """Next 64-bit value of SplitMix64 (Steele et al. 2014); advances ``state[0]``."""
     z = state[0] + _GOLDEN
@@ -28,13 +28,13 @@ def _splitmix64(state):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _randint(state, n):
     """Uniform integer in [0, n) (modulo bias < n / 2**64, negligible)."""
     return np.int64(_splitmix64(state) % np.uint64(n))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rmsac_plane(
     points, threshold, log_one_minus_p, max_iterations, n_pretest, seed, max_degenerate
 ):
@@ -161,7 +161,7 @@ def _msac_penalty(points, a, b, c, d, threshold, best_penalty):
     return penalty, count, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def plane_distances(points, coefficients):
     """Absolute distances ``|a x + b y + c z + d|`` of (N, 3) points to a unit-normal plane, (N,)."""
     n = points.shape[0]
@@ -172,7 +172,7 @@ def plane_distances(points, coefficients):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mean_and_covariance(points, indices):
     """Centroid (3,) and covariance (3, 3) (divided by M) of ``points[indices]``; two passes for
     accuracy far from the origin. ``indices`` (M,) int64, M >= 1. Sums accumulate in scalars
@@ -189,7 +189,7 @@ def mean_and_covariance(points, indices):
     return _covariance_about(points, indices, m, sx / m, sy / m, sz / m)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _covariance_about(points, indices, m, mx, my, mz):
     """Mean (3,) and covariance (3, 3) / m about (mx, my, mz) of the points at ``indices``, or of
     the first ``m`` points when ``indices`` is empty."""
@@ -228,7 +228,7 @@ def _covariance_about(points, indices, m, mx, my, mz):
     return mean, cov
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mean_and_covariance_all(points):
     """:func:`mean_and_covariance` of all the (N, 3) points (same arithmetic, no index array)."""
     m = points.shape[0]
@@ -242,7 +242,7 @@ def mean_and_covariance_all(points):
     return _covariance_about(points, np.empty(0, np.int64), m, sx / m, sy / m, sz / m)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def inliers_and_sum(points, coefficients, threshold):
     """Sorted indices (int64) of the points at distance strictly below ``threshold`` of a
     unit-normal plane (:func:`plane_distances` below the threshold), and the sum (3,) of their
@@ -272,7 +272,7 @@ def inliers_and_sum(points, coefficients, threshold):
     return idx[:j], sums
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def inliers_and_squares(points, coefficients, threshold):
     """Sorted inlier indices (int64) as :func:`inliers_and_sum`, and their squared distances
     (equal to ``plane_distances(points, coefficients)[inliers] ** 2``)."""
@@ -290,7 +290,7 @@ def inliers_and_squares(points, coefficients, threshold):
     return idx[:j], sq[:j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def covariance_from_sum(points, indices, sums):
     """:func:`mean_and_covariance` of ``points[indices]`` (M >= 1) given the coordinate sums (3,)
     of :func:`inliers_and_sum` (same result, one pass fewer)."""
@@ -298,7 +298,7 @@ def covariance_from_sum(points, indices, sums):
     return _covariance_about(points, indices, m, sums[0] / m, sums[1] / m, sums[2] / m)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def complement(remaining, removed, n):
     """``remaining`` (R,) without the entries at the sorted, unique positions ``removed`` (K,);
     an empty ``remaining`` stands for ``arange(n)``."""

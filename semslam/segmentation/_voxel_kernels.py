@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def voxel_coords(points, leaf, pcl_rounding):
     """Integer voxel coordinates (N, 3) float64 = floor(p / leaf), or PCL's float32
     floor(float32(p) * float32(1 / leaf)); and their per-axis minimum and maximum (3,) each."""
@@ -27,7 +27,7 @@ def voxel_coords(points, leaf, pcl_rounding):
     return ijk, lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def packed_keys(ijk, lo, nx, ny):
     """Linear voxel index ``i + nx*(j + ny*k)`` relative to ``lo`` (PCL's order: x fastest), (N,) int64."""
     n = ijk.shape[0]
@@ -39,7 +39,7 @@ def packed_keys(ijk, lo, nx, ny):
     return keys
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def centroids_from_order(points, sorted_keys, order):
     """Given ``order`` sorting the points by key and ``sorted_keys = keys[order]``: centroids (M, 3),
     counts (M,), and the voxel row of every point (N,), voxels in ascending key order."""
@@ -68,7 +68,7 @@ def centroids_from_order(points, sorted_keys, order):
     return sums, counts, point_voxel
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def radix_argsort(keys, max_key):
     """Stable argsort (N,) int64 of non-negative int64 ``keys`` <= ``max_key``, and the sorted keys:
     LSD radix sort on 11-bit digits (3 passes for keys < 2**33). 2048 buckets keep the scatter
@@ -103,7 +103,7 @@ def radix_argsort(keys, max_key):
     return order, k_cur
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def coord_bounds(points, leaf, pcl_rounding):
     """Per-axis minimum and maximum (3,) each of the voxel coordinates of :func:`voxel_coords`,
     computed from the coordinate extremes (floor and the division are monotone, so
@@ -129,7 +129,7 @@ def coord_bounds(points, leaf, pcl_rounding):
     return lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sorted_packed_keys(points, leaf, pcl_rounding, lo, nx, ny, max_key):
     """Stable sort of the points by voxel key, as one (N,) int64 array ``key << 32 | point index``.
 
@@ -182,7 +182,7 @@ def sorted_packed_keys(points, leaf, pcl_rounding, lo, nx, ny, max_key):
     return cur
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def centroids_from_packed(points, values, packed):
     """Centroids (M, 3), counts (M,), voxel row of every point (N,) and per-voxel means (M,) of
     ``values`` ((N,), or (0,) for none) from the sorted words of :func:`sorted_packed_keys`; and
@@ -231,7 +231,7 @@ def centroids_from_packed(points, values, packed):
     return sums, counts, point_voxel, means, start
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def points_of_voxels(packed, start, voxels):
     """Sorted indices (int64) of the points of the given voxels (distinct), from the words and run
     starts of :func:`sorted_packed_keys` / :func:`centroids_from_packed`."""
@@ -248,7 +248,7 @@ def points_of_voxels(packed, start, voxels):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def points_in_voxels(point_voxel, voxels, n_voxels):
     """Sorted indices (int64) of the points whose voxel ``point_voxel[i]`` is one of ``voxels``
     (any order, values in [0, n_voxels))."""

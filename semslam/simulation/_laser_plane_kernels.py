@@ -18,7 +18,7 @@ _WINDOW_TOL_RAD = 1e-5
 _PLANE_TOL_M = 1e-9
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def wrap_angle(x):
     """``x`` (rad) shifted by one turn into [-pi, pi] when outside it (``x``: a difference of two angles in [-pi, pi])."""
     if x > np.pi:
@@ -28,7 +28,7 @@ def wrap_angle(x):
     return x
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def face_window(f, lverts, ox, oy, oz, px, py, pz, sx, sy, sz, yx, yy, yz):
     """In-plane angular window (centre, half width) where the laser plane (origin o, normal p, axes s
     and y) cuts large face f; half < 0 when it does not cut it, half > pi when every ray must test it."""
@@ -76,7 +76,7 @@ def face_window(f, lverts, ox, oy, oz, px, py, pz, sx, sy, sz, yx, yy, yz):
     return ang0 + 0.5 * (lo + hi), 0.5 * (hi - lo) + _WINDOW_TOL_RAD
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def line_plane(R, k, sin_a, cos_a):
     """Line k's laser plane (world): in-plane axes s (phi = 0) and y (phi = pi / 2), normal p."""
     sx = R[k, 0, 0] * sin_a[k] + R[k, 0, 2] * cos_a[k]  # in-plane axis (phi = 0)
@@ -89,7 +89,7 @@ def line_plane(R, k, sin_a, cos_a):
     return sx, sy, sz, yx, yy, yz, px, py, pz
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def large_faces_cut(lverts, lv0, ln, ox, oy, oz, plane, faces, centre, half, num):
     """The large faces the laser plane (origin o) cuts, in the first n entries of ``faces``, with the
     angular window of the cut (``centre``, ``half``) and the offset ``num`` of the face's plane; returns n."""
@@ -108,7 +108,7 @@ def large_faces_cut(lverts, lv0, ln, ox, oy, oz, plane, faces, centre, half, num
     return n_rel
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def mark_small_disk_rays(mark, m, phi, phi_tol, sc, sr, ox, oy, oz, plane):
     """Small-face spheres cut by the laser plane (origin o) are disks: ``mark[j]`` for the rays that reach one."""
     sx, sy, sz, yx, yy, yz, px, py, pz = plane
@@ -132,7 +132,7 @@ def mark_small_disk_rays(mark, m, phi, phi_tol, sc, sr, ox, oy, oz, plane):
                 mark[j] = True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def first_large_hit(phi_j, ox, oy, oz, dx, dy, dz, n_rel, faces, centre, half, num, ln, len_, lec):
     """Distance (inf none) and large face (-1 none) of the first hit of the ray from o along d, at in-plane
     angle ``phi_j``, among the first ``n_rel`` faces cut by its laser plane (:func:`large_faces_cut`)."""

@@ -192,7 +192,7 @@ def _group_spheres(tris: np.ndarray, centroid: np.ndarray, cell_m: float) -> tup
     return centres, r + SPHERE_MARGIN_M
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def inside_large(f, px, py, pz, edge_n, edge_c):
     """True if the point (on face ``f``'s plane) lies inside large face ``f`` (with EDGE_TOL_M)."""
     for e in range(3):

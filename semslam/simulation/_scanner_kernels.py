@@ -18,7 +18,7 @@ from ._laser_plane_kernels import first_large_hit, large_faces_cut, line_plane, 
 from ._ray_kernels import inside_large
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _direction(R, k, dirs_local, i):
     """World direction of ray i of line k (the one expression every kernel uses: identical bits)."""
     lx, ly, lz = dirs_local[i, 0], dirs_local[i, 1], dirs_local[i, 2]
@@ -27,7 +27,7 @@ def _direction(R, k, dirs_local, i):
             R[k, 2, 0] * lx + R[k, 2, 1] * ly + R[k, 2, 2] * lz)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def laser_pass(dirs_local, R, t, m, sin_a, cos_a, phi, phi_tol, lid, lverts, lv0, ln, len_, lec, sc, sr, offset):
     """First hit of every laser ray among the large faces, and the rays that may hit a small face.
 
@@ -72,7 +72,7 @@ def laser_pass(dirs_local, R, t, m, sin_a, cos_a, phi, phi_tol, lid, lverts, lv0
     return tri, t_hit, cand[:c].copy(), o32[:c].copy(), d32[:c].copy(), tf32[:c].copy()
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def merge_small_hits(tri, t_hit, cand, small_tri, dirs_local, R, t, m, v0, normals):
     """Replace the large-face hit of a candidate ray by its small-face hit when nearer (float64)."""
     for q in range(cand.shape[0]):
@@ -93,7 +93,7 @@ def merge_small_hits(tri, t_hit, cand, small_tri, dirs_local, R, t, m, v0, norma
             t_hit[i] = num / den
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _camera_centre(R, t, line, cam_local):
     """World position of the camera during line ``line``."""
     cx = t[line, 0] + R[line, 0, 0] * cam_local[0] + R[line, 0, 1] * cam_local[1] + R[line, 0, 2] * cam_local[2]
@@ -102,7 +102,7 @@ def _camera_centre(R, t, line, cam_local):
     return cx, cy, cz
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _camera_view_hits(line, m, k, dirs_local, t_hit, R, cam_local, axis_local, cos_half_fov, min_range, max_range,
                       end_gap, cx, cy, cz, idx, rcam, cd):
     """Append the line's laser hits in range and in the camera's view to ``idx, rcam`` from entry ``k``
@@ -135,7 +135,7 @@ def _camera_view_hits(line, m, k, dirs_local, t_hit, R, cam_local, axis_local, c
     return k, (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _large_faces_in_box(box, cx, cy, cz, lv0, ln, faces, s_cam):
     """Large faces whose plane crosses ``box``, in the first n entries of ``faces``, with the signed
     distance ``s_cam`` of the camera centre c from the face's plane; returns n."""
@@ -154,7 +154,7 @@ def _large_faces_in_box(box, cx, cy, cz, lv0, ln, faces, s_cam):
     return n_rel
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _block_by_large_faces(k0, k, rcam, end_gap, cd, cx, cy, cz, n_rel, faces, s_cam, ln, len_, lec, blocked):
     """``blocked[k0 + q]`` for the segments ``c + s cd[q]`` (0 < s < camera range - end_gap) that cross one of
     the first ``n_rel`` large faces (:func:`_large_faces_in_box`)."""
@@ -175,7 +175,7 @@ def _block_by_large_faces(k0, k, rcam, end_gap, cd, cx, cy, cz, n_rel, faces, s_
                 break
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _mark_small_sphere_segments(mark, k0, k, blocked, rcam, end_gap, cd, cx, cy, cz, box, sc, sr):
     """Small-face spheres that touch ``box``: ``mark[q]`` for the open segments (not ``blocked``) that
     pass through one (candidates for Embree)."""
@@ -197,7 +197,7 @@ def _mark_small_sphere_segments(mark, k0, k, blocked, rcam, end_gap, cd, cx, cy,
                 mark[q] = True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def camera_pass(dirs_local, t_hit, R, t, m, cam_local, axis_local, cos_half_fov, min_range, max_range, end_gap,
                 lv0, ln, len_, lec, sc, sr, offset):
     """Laser hits within range and inside the camera's field of view and range, and whether the
@@ -245,7 +245,7 @@ def camera_pass(dirs_local, t_hit, R, t, m, cam_local, axis_local, cos_half_fov,
             len32[:c].copy())
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def assemble(idx, rcam, seen, keep, scatter, scatter_u, gauss, dirs_local, R, tri, t_hit, normals, face_instance,
              cam_local, m, noise_floor, noise_r2, attenuation, min_range, max_range, backscatter_id):
     """The scan's points in ray order (line by line; a ray's surface point before its backscatter).

@@ -122,7 +122,7 @@ def subtract_outer_inplace(P: np.ndarray, W: np.ndarray) -> None:
 from numba import njit  # noqa: E402
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def joseph_update(P, x, loc, Hc, nu, Rn):
     """In-place Joseph-form update of ``(x, P)`` for ``z = H x + n`` with ``H`` non-zero on columns ``loc``.
 
@@ -164,7 +164,7 @@ def joseph_update(P, x, loc, Hc, nu, Rn):
     return K, S
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def predict_vehicle(P, x, R, dt, q, att_cov, nv, bias_rw, i_yaw, i_dvl, dvl_a, dvl_q, slope_a, slope_q):
     """In-place constant-velocity prediction of the vehicle rows of ``(x, P)``; returns ``F`` (nv, nv).
 

@@ -249,3 +249,116 @@ def test_semslam_ros_without_a_roscore_says_so_in_one_line(dive, tmp_path, monke
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 1 and len(err) == 1 and err[0].startswith("semslam: error: No ROS master answers at ROS_MASTER_URI=")
     assert not (tmp_path / "run").exists()
+
+
+
+@pytest.fixture(scope="module")
+def dive_with_gps(tmp_path_factory):
+    """The dive of ``dive`` (seed 4) with 5 surface GPS fixes before it, as a ROS 1 bag, its topic map (GPS topic
+    and geodetic origin), vehicle file and database; and dive 1's map (the same dive run offline: a map placed by
+    the fixes, reusable)."""
+    require_ros()
+    import dataclasses
+
+    from semslam.dataset import write_vehicle_toml
+    from semslam.dataset.rosbag_write import topic_map_of, write_bag
+    from semslam.recognition import load_database
+    from semslam.recognition.storage import save_database
+    from semslam.run.dive import run_dive
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
+    from semslam.simulation.builtin_db import builtin_database
+    from semslam.simulation.config import ScannerConfig
+
+    d = tmp_path_factory.mktemp("dive_gps")
+    cfg = SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1), scanner=ScannerConfig(n_lines=200,
+                                                                                                  points_per_line=200))
+    cfg = cfg.replace(fixes=dataclasses.replace(cfg.fixes, gps_count=5))
+    mission = simulate_dataset(cfg, seed=4)
+    files = {"bag": write_bag(mission, d / "dive.bag", "ros1"), "topics": d / "topics.toml",
+             "vehicle": d / "vehicle.toml", "db": d / "objects.npz"}
+    files["topics"].write_text(topic_map_of(mission).to_toml(), encoding="utf-8")
+    write_vehicle_toml(mission.vehicle, files["vehicle"])
+    save_database(builtin_database(seed=0), files["db"])
+    (d / "dive1").mkdir()
+    run_dive(files["bag"], d / "dive1", db=load_database(files["db"]), modes=("pose",), topics=files["topics"],
+             vehicle=files["vehicle"])
+    files["prior"] = d / "dive1" / "slam" / "pose" / "map.json"
+    return files
+
+
+def test_node_stopped_mid_dive_with_gps_a_prior_map_and_a_silent_topic_writes_a_complete_run(dive_with_gps, tmp_path):
+    """The node on a dive with GPS fixes before it, given dive 1's map (``--prior-map``) and a topic map naming a
+    USBL topic nothing publishes, stopped with SIGINT while ``rosbag play`` is still playing: /diagnostics names
+    the silent topic (WARN) while odometry goes on being published; the run directory written at SIGINT is
+    complete, started from the GPS fix, its trajectory the offline run's with the same prior map up to where it
+    stopped (within 5 cm), its map the prior map's landmarks (none duplicated)."""
+    import csv
+
+    from semslam.dataset.rosbag import read_topic_map
+    from semslam.io.ros import open_bag
+    from semslam.recognition import load_database
+    from semslam.run.dive import run_dive
+    from semslam.slam.survey import read_survey
+
+    dive, prior = dive_with_gps, dive_with_gps["prior"]
+    ref_dir = tmp_path / "offline_prior"
+    ref_dir.mkdir()
+    run_dive(dive["bag"], ref_dir, db=load_database(dive["db"]), modes=("pose",), topics=dive["topics"],
+             vehicle=dive["vehicle"], survey=read_survey(prior), export=False)
+    ref = list(csv.DictReader(open(ref_dir / "slam" / "pose" / "trajectory.csv", encoding="utf-8")))
+    rs = np.array([float(r["stamp_s"]) for r in ref])
+    rp = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in ref])
+    tmap = read_topic_map(dive["topics"])
+    assert tmap.gps is not None and tmap.usbl is None
+    topics = tmp_path / "topics_usbl.toml"
+    topics.write_text(tmap.to_toml().replace("[topics]\n", '[topics]\nusbl = "/usbl/fix"\n'), encoding="utf-8")
+    assert read_topic_map(topics).usbl == "/usbl/fix"
+
+    run = tmp_path / "run"
+    with roscore(tmp_path) as env:
+        uri = env["ROS_MASTER_URI"]
+        node_cmd = [sys.executable, "-m", "semslam.run.ros1.node", "--db", str(dive["db"]), "--topics", str(topics),
+                    "--vehicle", str(dive["vehicle"]), "--mode", "pose", "--out", str(run), "--prior-map", str(prior),
+                    "--scan-queue", "all", "--max-hold", "1000", "--window", "4.5", "--silent-after", "2"]
+        with started(node_cmd, env, tmp_path / "node.log") as node:
+            _wait(lambda: _node_up(uri, "/semslam") and _subscribed(uri, "/semslam/scans"), 60, "the node",
+                  tmp_path / "node.log")
+            with started([*_recorder(), "-O", str(tmp_path / "out.bag"), "/diagnostics", "/semslam/odometry"], env,
+                         tmp_path / "record.log", stop_timeout_s=60.0) as rec:
+                _wait(lambda: _subscribed(uri, "/semslam/odometry"), 30, "rosbag record", tmp_path / "record.log")
+                with started(["rosbag", "play", "-q", "-r", "1", str(dive["bag"])], env, tmp_path / "play.log") as play:
+                    time.sleep(rs[0] + 10.0)  # the fixes at the surface, then about half of the 24 s dive
+                    assert play.poll() is None, "rosbag play ended before the node was stopped"
+                    stop(node, timeout=60.0)  # Ctrl-C mid-dive
+                    assert node.returncode == 0, (tmp_path / "node.log").read_text()[-3000:]
+            assert rec.poll() is not None
+    # diagnostics: the silent USBL topic named (WARN), and odometry published after that warning
+    warned_at, last_odometry = None, None
+    with open_bag(tmp_path / "out.bag") as b:
+        for m in b.messages(["/diagnostics", "/semslam/odometry"]):
+            if m.topic == "/diagnostics":
+                st = m.msg.status[0]
+                if warned_at is None and st.level == 1 and "/usbl/fix" in st.message:
+                    warned_at = m.stamp_ns
+                    assert "no message for 2 s" in st.message
+            else:
+                last_odometry = m.stamp_ns
+    assert warned_at is not None, "no diagnostics named the silent USBL topic"
+    assert last_odometry is not None and last_odometry > warned_at + 10**9  # the node went on publishing
+    # the run directory written at SIGINT: complete, the offline run with the prior map up to the stop
+    for f in ("run.json", "detections.jsonl", "ros_node.json", "slam/pose/trajectory.csv",
+              "slam/pose/map.json", "slam/pose/landmarks.csv"):
+        assert (run / f).is_file(), f
+    doc = json.loads((run / "run.json").read_text())
+    assert doc["source"]["source"]["prior_map"] == str(prior) and doc["verdict"] in ("ok", "warning")
+    assert "position fix" in doc["start"]["sources"]["horizontal"]
+    rows = list(csv.DictReader(open(run / "slam" / "pose" / "trajectory.csv", encoding="utf-8")))
+    ts = np.array([float(r["stamp_s"]) for r in rows])
+    p = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
+    assert rs[0] + 5.0 < ts[-1] < rs[-1] - 3.0, f"stopped at {ts[-1]:.1f} s of a {rs[0]:.1f}-{rs[-1]:.1f} s dive"
+    ref_p = np.stack([np.interp(ts, rs, rp[:, i]) for i in range(3)], axis=1)
+    err = np.linalg.norm(p - ref_p, axis=1)
+    assert err.max() < 0.05, f"trajectory off the offline run with the prior map by up to {err.max():.3f} m"
+    n_prior = len(json.loads(prior.read_text())["landmarks"])
+    assert n_prior >= 1
+    assert len(json.loads((run / "slam" / "pose" / "map.json").read_text())["landmarks"]) == n_prior

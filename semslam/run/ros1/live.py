@@ -12,7 +12,8 @@ Only three things are the node's own:
 0. **The source's reorder window** (``reorder_window_s``, :class:`~semslam.run.ros1.timing.ReorderBuffer`): the
    runner takes messages in stamp order (a source's promise; a bag source reorders within 2 s), topics arrive with
    their transport delays. Older than what was released: dropped, counted (``dropped_late``, with the runner's).
-1. **Recognition off the dispatcher thread.** A scan goes to a worker through a keep-newest slot of size one (a
+1. **Recognition off the dispatcher thread.** A scan goes to a worker as it arrives, ahead of the reorder window
+   (recognition needs no other message), through a keep-newest slot of size one (a
    scan waiting when a newer one comes is dropped, counted) and its detections enter through
    :meth:`Runner.add_scan_detections`. The runner's delay line is in message time; recognition takes wall time. So
    a navigation message whose feeding would release the filter past the start of a scan still in recognition
@@ -29,6 +30,7 @@ Callbacks: ``on_estimate(live)`` after each batch that moved the filter (``/sems
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
 import time
@@ -195,6 +197,10 @@ class LiveSlam:
                 self._recent_attitude.append((msg.stamp_s, np.asarray(msg.rpy_rad, dtype=float)))
             elif kind == "dvl" and msg.valid and np.isfinite(msg.velocity_mps).all():
                 self._recent_dvl.append((msg.stamp_s, msg.velocity_mps))
+            elif kind == "scan" and msg.stamp_s >= self.buffer.released_s:
+                # recognition starts as the scan arrives (it needs no other message): only its entry into the
+                # filter waits for the reorder window (a scan the window will drop as late is not recognised)
+                self._scan(msg, wall)
             for _, _, (m, w) in self.buffer.push(msg.stamp_s, kind, (msg, wall)):
                 self._released(m, w)
             self._advance()
@@ -244,8 +250,6 @@ class LiveSlam:
         return out
 
     def _released(self, msg, wall: float) -> None:
-        if msg.kind == "scan":
-            self._scan(msg, wall)
         # every message (a scan too: the runner lengthens its delay line to the scan's span) enters the runner in
         # stamp order, behind the scans still in recognition: the runner's newest stamp, hence what it releases,
         # never runs ahead of them
@@ -263,7 +267,7 @@ class LiveSlam:
             up = up_from_attitude_samples(np.array(ts), np.array(rpy), self.vehicle.scanner.T_vehicle_scanner,
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
         job = ScanJob(msg, wall, up)
-        self._pending.append(job)
+        bisect.insort(self._pending, job, key=lambda j: j.start_s)  # arrival order need not be stamp order
         old = self.slot.put(job)
         if old is not None:
             old.abandoned = True

@@ -328,11 +328,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-hold", type=float, default=5.0)
     p.add_argument("--window", type=float, default=0.5)
     p.add_argument("--scan-queue", choices=("newest", "all"), default="newest")
+    p.add_argument("--silent-after", type=float, default=5.0, help="seconds without a message before a mapped "
+                   "topic is called silent in /diagnostics")
     args = p.parse_args(argv)
     try:
         summary = run_node(args.db, read_topic_map(args.topics), read_vehicle_toml(args.vehicle), mode=args.mode,
                            out_dir=args.out, overwrite=args.overwrite, seed=args.seed, max_hold_s=args.max_hold,
-                           reorder_window_s=args.window, scan_queue=args.scan_queue, prior_map=args.prior_map)
+                           reorder_window_s=args.window, scan_queue=args.scan_queue, prior_map=args.prior_map,
+                           silent_after_s=args.silent_after)
     except SemslamError as err:
         print(f"semslam: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 1
