@@ -232,6 +232,7 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     from ._progress import progress_steps
     from .pipeline import PipelineConfig, ScanRecognizer
     from .run import open_dive, run_stream
+    from .run.runner import LOOKAHEAD
     from .simulation.truth_slam import builtin_symmetries
     from .io.detections import write_detections_jsonl
     from .run.rundir import write_run
@@ -252,7 +253,7 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
 
         symmetries = builtin_symmetries() if symmetries is None else symmetries
         found = run_stream(open_dive(mission), modes=tuple(cfg.modes), recognizer=recognizer, symmetries=symmetries,
-                           seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score)
+                           seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score, lookahead=LOOKAHEAD)
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})

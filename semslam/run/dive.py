@@ -24,7 +24,7 @@ from ..io.detections import write_detections_jsonl
 from .rundir import write_run
 from .rundir import DETECTIONS, mode_dir
 from .health import health_verdict
-from .runner import RunOutcome, run_stream
+from .runner import LOOKAHEAD, RunOutcome, run_stream
 from .sources import open_dive
 
 RUN_JSON = "run.json"
@@ -48,7 +48,7 @@ def run_dive(source: Any, out_dir: str | Path, *, db, modes=MODES, topics=None, 
     recognizer.warm_up()
     outcome = run_stream(dive, modes=tuple(modes), recognizer=recognizer, config=cfg, symmetries=db.symmetries(),
                          backend=backend, survey=survey, seed=seed, keep_unreliable=keep_unreliable,
-                         up_from_attitude=up_from_attitude)
+                         up_from_attitude=up_from_attitude, lookahead=LOOKAHEAD)
     # after the run: a dataset directory's (or a dataset's) ground truth, when it has one, for the metrics only
     from ..evaluation.slam_run import evaluate_results, load_reference
 
@@ -74,7 +74,7 @@ def detect_dive(source: Any, *, db, topics=None, vehicle=None, msg_dirs=(), pipe
     with progress_steps(progress, n_scans, "recognise", "scan") as step:
         outcome = run_stream(dive, modes=("dr",), recognizer=recognizer, symmetries=db.symmetries(), seed=seed,
                              keep_unreliable=keep_unreliable, up_from_attitude=up_from_attitude,
-                             on_scan=lambda *_: step())
+                             on_scan=lambda *_: step(), lookahead=LOOKAHEAD)
     if not outcome.scans:
         raise InputError(f"The dive {dive.name!r} has no scans to recognise objects in.")
     return outcome

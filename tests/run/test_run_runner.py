@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from semslam.dataset import PositionFixLog
+from semslam.errors import InputError
 from semslam.simulation.synthetic import square_dataset
 from semslam.run import Attitude, Depth, Fix, Runner, open_dive, run_stream
 from semslam.run.health import HealthLimits, health_verdict
@@ -111,3 +112,57 @@ def test_health_verdict_levels_follow_the_documented_limits(mission):
     P = res.position_cov_m2.copy()
     P[-1] = np.eye(3) * 1e6
     assert health_verdict(replace(res, position_cov_m2=P)).level == "bad"
+
+
+class _Jittery:
+    """The real recogniser, each scan delayed by a seeded 0-20 ms (scans finish out of order in the threads), the
+    scans of ``slow`` by 0.6 s (longer than the delay line takes to reach them)."""
+
+    def __init__(self, recognizer, slow=()) -> None:
+        self.r, self.config, self.slow = recognizer, recognizer.config, set(slow)
+
+    def recognize(self, cloud, **kw):
+        import time
+
+        sid = kw["scan_id"]
+        time.sleep(0.6 if sid in self.slow else float(np.random.default_rng(sid).uniform(0.0, 0.02)))
+        return self.r.recognize(cloud, **kw)
+
+
+def test_scans_recognised_ahead_in_threads_give_the_one_at_a_time_run_bit_for_bit():
+    """A one-loop simulated dive (scans with objects) recognised one at a time, then with lookahead 1 and 8 (8 scans
+    span more than the delay line; some scans with detections slow, the others finishing out of order): the same
+    detections in the same order, the same per-scan statistics order and every mode's trajectory, covariance and
+    map bit for bit (the filters wait for a scan still in recognition)."""
+    from semslam.pipeline import ScanRecognizer
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
+    from semslam.simulation.builtin_db import builtin_database
+    from semslam.simulation.config import ScannerConfig
+    from semslam.simulation.truth_slam import builtin_symmetries
+
+    ds = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
+                                                    scanner=ScannerConfig(n_lines=150, points_per_line=150)), seed=3)
+    rec = ScanRecognizer(builtin_database(seed=0), seed=0)
+    ref = run_stream(open_dive(ds), modes=("dr", "pose"), recognizer=rec, symmetries=builtin_symmetries())
+    assert sum(len(v) for v in ref.detections_by_scan.values()) >= 3
+    slow = sorted(ref.detections_by_scan)[::3]  # some scans with detections come too late for the delay line
+    runs = {k: run_stream(open_dive(ds), modes=("dr", "pose"), recognizer=_Jittery(rec, slow), lookahead=k,
+                          symmetries=builtin_symmetries()) for k in (1, 8)}
+    for k, out in runs.items():
+        assert [s["scan_id"] for s in out.scans] == [s["scan_id"] for s in ref.scans], k
+        assert {sid: [(d.label, d.stamp_s, d.T_sensor_object.matrix.tobytes()) for d in v]
+                for sid, v in out.detections_by_scan.items()} == \
+               {sid: [(d.label, d.stamp_s, d.T_sensor_object.matrix.tobytes()) for d in v]
+                for sid, v in ref.detections_by_scan.items()}, k
+        for mode in ("dr", "pose"):
+            np.testing.assert_array_equal(out.results[mode].position_ned_m, ref.results[mode].position_ned_m)
+            np.testing.assert_array_equal(out.results[mode].position_cov_m2, ref.results[mode].position_cov_m2)
+        assert [lm.pose_xyzrpy.tolist() for lm in out.results["pose"].landmarks] == \
+               [lm.pose_xyzrpy.tolist() for lm in ref.results["pose"].landmarks], k
+        assert out.counts.get("late_dropped", {}).get("detections", 0) == 0
+
+
+def test_lookahead_must_be_a_small_non_negative_integer(mission):
+    for bad in (-1, 1.5, True, 65):
+        with pytest.raises(InputError, match="lookahead"):
+            Runner(mission.vehicle, modes=("dr",), lookahead=bad)
