@@ -7,6 +7,7 @@ reads it back is :data:`SEMSLAM_TOPICS`. Stamps start at :data:`TIME_ORIGIN_NS` 
 
 from __future__ import annotations
 
+import heapq
 import os
 from pathlib import Path
 
@@ -38,13 +39,15 @@ SEMSLAM_TOPICS = TopicMap(
 _G = 9.80665
 
 
-def topic_map_of(dataset: Dataset) -> TopicMap:
+def topic_map_of(dataset: Dataset, *, scans: bool | None = None) -> TopicMap:
     """The topic map of the bag :func:`write_bag` writes for ``dataset``: :data:`SEMSLAM_TOPICS`, plus the GPS and
-    USBL topics and the geodetic origin when the dataset has position fixes; no scans topic without scans."""
+    USBL topics and the geodetic origin when the dataset has position fixes; no scans topic without scans (``scans``:
+    whether the bag has scans, when they are given to :func:`write_bag` apart; default: the dataset's)."""
     from dataclasses import replace
 
     f = dataset.fixes
-    base = SEMSLAM_TOPICS if dataset.scans else replace(SEMSLAM_TOPICS, scans=None)  # the bag has no such topic
+    has_scans = bool(dataset.scans) if scans is None else bool(scans)
+    base = SEMSLAM_TOPICS if has_scans else replace(SEMSLAM_TOPICS, scans=None)  # the bag has no such topic
     if f is None:
         return base
     return replace(base, gps="/semslam/gps" if "gps" in f.source else None,
@@ -56,8 +59,9 @@ def _ns(t: float) -> int:
     return TIME_ORIGIN_NS + int(round(float(t) * 1e9))
 
 
-def _messages(ds: Dataset, store, T):
-    """``(stamp_ns, topic, msgtype, message)`` of every log sample and scan, in time order."""
+def _messages(ds: Dataset, store, T, scans=None):
+    """``(stamp_ns, topic, msgtype, message)`` of every log sample and scan, in time order (a generator: the scans
+    are encoded one at a time, from ``scans`` -- ``(record, cloud)`` in time order -- or the dataset's own)."""
     from ..geometry import rotation_from_rpy
     from ..io.ros import quat_xyzw_from_R_world_ned_vehicle_frd
     from ..io.ros._encode import encode_pointcloud2, ros_header
@@ -93,14 +97,16 @@ def _messages(ds: Dataset, store, T):
                                                  variance=(dep.water_density_kg_m3 * _G * dep.noise_m) ** 2)
         out.append((_ns(t), 2, "/semslam/pressure", "sensor_msgs/msg/FluidPressure", msg))
     out += _fix_messages(ds, store, T)
-    for rec in ds.scans:
-        cloud = ds.load_scan(rec.scan_id)
-        stamps = ds.point_stamps_s(rec, cloud)
-        start_ns = _ns(rec.start_stamp_s)
-        offs = (stamps - (start_ns - TIME_ORIGIN_NS) / 1e9) if stamps is not None else np.zeros(cloud.n_points)
-        msg = encode_pointcloud2(cloud.points_xyz_m, intensity=cloud.intensity, time_offset_s=offs, time_field="t",
-                                 time_encoding="float64_s", frame_id="scanner", stamp_ns=start_ns, typestore=store)
-        out.append((start_ns, 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg))
+
+    def scan_messages():
+        for rec, cloud in (((r, ds.load_scan(r.scan_id)) for r in ds.scans) if scans is None else scans):
+            stamps = ds.point_stamps_s(rec, cloud)
+            start_ns = _ns(rec.start_stamp_s)
+            offs = (stamps - (start_ns - TIME_ORIGIN_NS) / 1e9) if stamps is not None else np.zeros(cloud.n_points)
+            msg = encode_pointcloud2(cloud.points_xyz_m, intensity=cloud.intensity, time_offset_s=offs,
+                                     time_field="t", time_encoding="float64_s", frame_id="scanner", stamp_ns=start_ns,
+                                     typestore=store)
+            yield start_ns, 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg
     # the scanner's mounting as a vehicle's URDF publishes it: base_link (FLU) -> scanner, once, on /tf_static
     from ..geometry import RigidTransform, quat_wxyz_from_rotation
     from ..io.ros import C_FRD_FLU
@@ -115,7 +121,8 @@ def _messages(ds: Dataset, store, T):
                                                    rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
     out.append((t0, -1, "/tf_static", "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](transforms=[tf])))
     out.sort(key=lambda m: (m[0], m[1]))
-    return [(ns, topic, mt, msg) for ns, _, topic, mt, msg in out]
+    merged = heapq.merge(out, scan_messages(), key=lambda m: (m[0], m[1]))  # stable: the order of one sort
+    return ((ns, topic, mt, msg) for ns, _, topic, mt, msg in merged)
 
 
 def _fix_messages(ds: Dataset, store, T) -> list:
@@ -142,10 +149,13 @@ def _fix_messages(ds: Dataset, store, T) -> list:
     return out
 
 
-def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap", *, overwrite: bool = False) -> Path:
+def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap", *, overwrite: bool = False,
+              scans=None) -> Path:
     """Write ``dataset`` as a bag (see the module docstring); atomic (a staging sibling, renamed at the end). An
     existing bag is replaced only with ``overwrite``; a bag directory (ROS 2) only when semslam's ownership marker
-    proves it wrote it (:mod:`semslam._outdir`)."""
+    proves it wrote it (:mod:`semslam._outdir`). Scans are encoded and written one at a time: from ``scans``
+    (``(record, cloud)`` in time order, e.g. :func:`semslam.simulation.simulate_scans` for a dive too long to hold
+    in memory) when given, else the dataset's own."""
     from rosbags.typesys import get_types_from_msg
 
     from ..io.ros._encode import default_typestore
@@ -164,7 +174,7 @@ def write_bag(dataset: Dataset, path: str | os.PathLike, fmt: str = "ros2-mcap",
     store.register(get_types_from_msg(DVL_MSG, DVL_TYPE))
     if "tf2_msgs/msg/TFMessage" not in store.types:  # rosbags' ROS 1 Noetic store lacks it
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    msgs = _messages(dataset, store, store.types)
+    msgs = _messages(dataset, store, store.types, scans)
     if ros1:
         from rosbags.rosbag1 import Writer
 

@@ -16,7 +16,7 @@ from .config import (
 from .kinect import acquire_views, builtin_view_clouds, kinect_view
 from .objects import BUILTIN_LABELS, ObjectModel, builtin_objects, load_object, make_object
 from .scanner import LaserScanner, ScanResult
-from .simulate import simulate_dataset
+from .simulate import simulate_dataset, simulate_scans
 from .trajectory import Trajectory, TrajectorySample
 from .world import World, build_world, floor_depth_m
 
@@ -46,5 +46,5 @@ __all__ = [
                      "kinect_view",
                      "load_object",
                      "make_object",
-                     "simulate_dataset",
+                     "simulate_dataset", "simulate_scans",
 ]

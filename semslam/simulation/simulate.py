@@ -11,6 +11,8 @@ footprint at the scan's mid stamp (the default mission: ~100-150 scans).
 
 from __future__ import annotations
 
+from typing import Any, Iterator
+
 import numpy as np
 
 from .._progress import progress_steps
@@ -56,7 +58,7 @@ def mission_trajectory(world: World, config: SimulatorConfig, rng: np.random.Gen
 def simulate_dataset(config: SimulatorConfig | None = None, *, seed: int = 0, with_scans: bool = True,
                      scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False,
                      objects: dict | None = None, world_seed: int | None = None) -> Dataset:
-    """Simulate a whole mission.
+    """Simulate a whole mission (a dive too long to hold its scans: :func:`simulate_scans`).
 
     Parameters
     ----------
@@ -82,24 +84,8 @@ def simulate_dataset(config: SimulatorConfig | None = None, *, seed: int = 0, wi
         records (``path`` = ``scans/scan_NNNNN.pcd``) and
         the in-memory clouds (``mission.load_scan(scan_id)``, frame ``"scanner"``).
     """
-    config = SimulatorConfig() if config is None else config
-    if not isinstance(config, SimulatorConfig):
-        raise SimulationError(
-            f"The 'config' argument of simulate_dataset must be a SimulatorConfig or None. Got "
-            f"{type(config).__name__} instead."
-        )
-    seed = _check_seed(seed)
     scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_dataset")
-    rngs = _streams(seed)
-    if world_seed is not None:
-        rngs["world"] = _streams(_check_seed(world_seed))["world"]
-    if objects is None:
-        objects = builtin_objects()
-    elif not isinstance(objects, dict) or not objects or not all(isinstance(m, ObjectModel) for m in objects.values()):
-        raise SimulationError("The 'objects' argument of simulate_dataset must be a non-empty dict of ObjectModel. "
-                              f"Got {type(objects).__name__} {objects!r:.80} instead.")
-    world = build_world(config.world, objects, seed=rngs["world"])
-    traj = mission_trajectory(world, config, rngs["trajectory"])
+    config, rngs, world, traj = _world_and_route(config, seed, objects, world_seed)
     dvl = simulate_dvl(traj, config.world, config.dvl, rngs["dvl"])
     ahrs = simulate_ahrs(traj, config.ahrs, rngs["ahrs"])
     depth = simulate_depth(traj, config.depth, rngs["depth"])
@@ -135,17 +121,64 @@ def simulate_dataset(config: SimulatorConfig | None = None, *, seed: int = 0, wi
                    clouds if with_scans else None, fixes=fixes, geodetic_origin=origin)
 
 
-def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,
-                    interval_s: float, rng: np.random.Generator, progress: bool):
+def _world_and_route(config, seed, objects, world_seed):
+    """Checked arguments of :func:`simulate_dataset` -> ``(config, rngs, world, trajectory)``."""
+    config = SimulatorConfig() if config is None else config
+    if not isinstance(config, SimulatorConfig):
+        raise SimulationError(
+            f"The 'config' argument of simulate_dataset must be a SimulatorConfig or None. Got "
+            f"{type(config).__name__} instead."
+        )
+    rngs = _streams(_check_seed(seed))
+    if world_seed is not None:
+        rngs["world"] = _streams(_check_seed(world_seed))["world"]
+    if objects is None:
+        objects = builtin_objects()
+    elif not isinstance(objects, dict) or not objects or not all(isinstance(m, ObjectModel) for m in objects.values()):
+        raise SimulationError("The 'objects' argument of simulate_dataset must be a non-empty dict of ObjectModel. "
+                              f"Got {type(objects).__name__} {objects!r:.80} instead.")
+    world = build_world(config.world, objects, seed=rngs["world"])
+    return config, rngs, world, mission_trajectory(world, config, rngs["trajectory"])
+
+
+def simulate_scans(config: SimulatorConfig | None = None, *, seed: int = 0,
+                   scan_interval_s: float = DEFAULT_SCAN_INTERVAL_S, progress: bool = False,
+                   objects: dict | None = None, world_seed: int | None = None) -> Iterator[tuple[ScanRecord, Any]]:
+    """The scans of ``simulate_dataset(config, seed=seed, ...)`` (same arguments) one at a time, ``(record,
+    cloud)`` in time order: the same records and clouds bit for bit, never all in memory (a long dive written
+    straight to a bag: :func:`semslam.dataset.rosbag_write.write_bag` with ``scans=``). Arguments are checked
+    here, at the call."""
+    scan_interval_s = check_positive("scan_interval_s", scan_interval_s, caller="simulate_scans")
+    config, rngs, world, traj = _world_and_route(config, seed, objects, world_seed)
+    scanner = LaserScanner(config.scanner)
+    _check_interval(scanner, scan_interval_s)
+    return _iter_scans(world, traj, scanner, config, scan_interval_s, rngs["scanner"], progress)
+
+
+def _check_interval(scanner: LaserScanner, interval_s: float) -> None:
     if interval_s < scanner.duration_s - 1e-12:
         raise SimulationError(f"The 'scan_interval_s' argument of simulate_dataset must be >= the scan duration "
                               f"{scanner.duration_s:.3f} s (1 / scan_rate_hz). Got {interval_s} instead.")
+
+
+def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,
+                    interval_s: float, rng: np.random.Generator, progress: bool):
+    _check_interval(scanner, interval_s)
+    records, clouds = [], {}
+    for rec, cloud in _iter_scans(world, traj, scanner, config, interval_s, rng, progress):
+        records.append(rec)
+        clouds[rec.scan_id] = cloud
+    return records, clouds
+
+
+def _iter_scans(world: World, traj: Trajectory, scanner: LaserScanner, config: SimulatorConfig,
+                interval_s: float, rng: np.random.Generator, progress: bool):
     caster = RayCaster(world.scene)
     T_vs = scanner.T_vehicle_scanner.matrix
     starts = np.arange(0.0, traj.duration_s - scanner.duration_s + 1e-9, interval_s)
     centres = np.array([o.T_world_object.translation_m for o in world.objects]).reshape(-1, 3)
     mids = traj.sample(starts + scanner.duration_s / 2).T_world_vehicle() @ T_vs
-    records, clouds = [], {}
+    scan_id = 0
     with progress_steps(progress, len(starts), "scans", "scan") as step:
         for k in range(len(starts)):
             step()
@@ -158,11 +191,9 @@ def _simulate_scans(world: World, traj: Trajectory, scanner: LaserScanner, confi
             result = scanner.scan(
                 caster, T_lines, seed=scan_rng, face_instance=world.face_instance, line_stamps_s=stamps
             )
-            scan_id = len(records)
-            records.append(ScanRecord(scan_id, float(stamps[0]), float(stamps[-1]), f"scans/scan_{scan_id:05d}.pcd",
-                                      result.cloud.n_points))
-            clouds[scan_id] = result.cloud
-    return records, clouds
+            yield (ScanRecord(scan_id, float(stamps[0]), float(stamps[-1]), f"scans/scan_{scan_id:05d}.pcd",
+                              result.cloud.n_points), result.cloud)
+            scan_id += 1
 
 
 def T_world_scanner_at(
