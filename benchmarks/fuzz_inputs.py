@@ -191,7 +191,7 @@ def stamp_game_bag(ds, path: Path, game: str, fmt: str = "ros1", rng: np.random.
     store.register(get_types_from_msg(DVL_MSG, DVL_TYPE))
     if "tf2_msgs/msg/TFMessage" not in store.types:
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    msgs = _messages(ds, store, store.types)
+    msgs = list(_messages(ds, store, store.types))
     T = store.types
 
     def stamped(msg, ns: int):

@@ -133,7 +133,7 @@ LIMITS: dict[str, Limit] = {
                                          integer=True),
     "slam.map.active_radius_m": _cfg(1e-3, 1e4, "m", "active-area radius"),
     "slam.output.history_rate_hz": _cfg(1e-3, 100.0, "Hz", "history (and smoother) epochs per second of dive"),
-    "slam.output.smoother_max_mb": _cfg(0.0, 1e5, "MB", "smoother memory budget (> 0)"),
+    "slam.output.smoother_max_mb": _cfg(0.0, 1e5, "MB", "smoother history budget, memory then a temporary file (> 0)"),
     # -- ROS bags: message values ----------------------------------------------------------------------
     "bag.fluid_pressure_pa": Limit(0.0, 1.2e8, "Pa", "absolute pressure (FluidPressure; 0-11 km of sea water)",
                                    "BagDecoder.depth", " (kPa or bar given for Pa?)"),

@@ -208,8 +208,9 @@ class OutputConfig:
     history_rate_hz: float = 2.0
     #: also estimate the trajectory from the whole mission (RTS smoother, offline; the filter is unchanged)
     smooth: bool = True
-    #: memory budget of the smoother (MB): beyond it the smoothed trajectory is skipped, and metrics say so
-    smoother_max_mb: float = 512.0
+    #: budget of the smoother's history (MB; the first 64 MB in memory, the rest in a temporary file: a 30-minute
+    #: dive with four landmarks needs ~0.8 GB): beyond it the smoothed trajectory is skipped, and metrics say so
+    smoother_max_mb: float = 4096.0
 
     def __post_init__(self) -> None:
         _check_types(self)

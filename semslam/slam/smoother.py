@@ -21,9 +21,12 @@ augmentation is a transition whose ``F`` has more rows than columns, which RTS h
 pseudo-inverse (eigenvalues below ``1e-12`` of the largest dropped): states without process noise, such as the
 DVL slope bias over flat ground, make ``P^-`` nearly singular.
 
-Memory. Every node stores two full covariances, ``O(n^2)`` each: fine for the small maps of an inspection
-mission (the default mission: ~1,000 nodes of 45 states, ~30 MB), not for thousands of landmarks. The recorder
-stops, and says so in :attr:`RtsRecorder.status`, when it would exceed ``max_bytes``.
+Memory. Every node stores two full covariances and the composed transition, ``O(n^2)`` each: ~30 MB for the
+default mission (~1,000 nodes of 45 states), ~0.8 GB for a 30-minute dive with four landmarks (~27,000 nodes of
+33 states). The first ``ram_bytes`` stay in memory; the rest go to an unnamed temporary file (deleted when closed,
+even on a crash) and are read back one node at a time by the backward pass, so resident memory stays flat
+however long the dive. The recorder stops, and says so in :attr:`RtsRecorder.status`, when the history would
+exceed ``max_bytes`` or the temporary file cannot be written (a full disk).
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-__all__ = ["RtsRecorder", "SmoothedStates"]
+__all__ = ["NodeStore", "RtsRecorder", "SmoothedStates"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,17 +58,19 @@ class RtsRecorder:
     n_keep : int
         Leading state entries returned at the marked epochs (the vehicle position and velocity: 6).
     max_bytes : float
-        Memory budget of the stored covariances; beyond it recording stops (``status`` says why) and
-        :meth:`smooth` returns None.
+        Budget of the stored history (memory and temporary file); beyond it recording stops (``status`` says why)
+        and :meth:`smooth` returns None.
+    ram_bytes : float
+        The part of the history kept in memory; the rest goes to a temporary file.
     """
 
-    def __init__(self, n_keep: int = 6, max_bytes: float = 512e6) -> None:
+    def __init__(self, n_keep: int = 6, max_bytes: float = 512e6, ram_bytes: float = 64e6) -> None:
         self.n_keep = int(n_keep)
         self.max_bytes = float(max_bytes)
         self.status = "recording"
         self._bytes = 0
-        self._post: list[tuple[np.ndarray, np.ndarray]] = []  # posterior of node j (j = 0 .. J-1)
-        self._prior: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # node j: x-, P-, F, angle mask
+        # node j (j = 0 .. J-1): its posterior x, P and the prior x-, P-, F, angle mask of the next
+        self._nodes = NodeStore(ram_bytes)
         self._open: tuple[np.ndarray, np.ndarray] | None = None  # posterior snapshot of the current node
         self._F: np.ndarray | None = None  # composed transition since that snapshot
         self._marks: list[int] = []
@@ -105,7 +110,7 @@ class RtsRecorder:
             return
         if self._open is not None:
             self._close(ekf)
-        self._marks.append(len(self._prior))
+        self._marks.append(len(self._nodes))
 
     def _take(self, ekf) -> tuple[np.ndarray, np.ndarray] | None:
         """A snapshot of ``ekf`` within the memory budget, else None (and recording stops)."""
@@ -122,13 +127,18 @@ class RtsRecorder:
         if snap is None:
             return
         x, P = snap
-        self._post.append(self._open)
-        self._prior.append((x, P, self._F, _angle_mask(ekf)))
+        self._bytes += self._F.nbytes
+        try:
+            self._nodes.append((*self._open, x, P, self._F, _angle_mask(ekf)))
+        except OSError as err:  # the temporary file cannot be written (a full disk): no smoothing, said
+            self._stop(f"skipped: the smoother's history could not be written to a temporary file ({err})")
+            return
         self._open, self._F = None, None
 
     def _stop(self, why: str) -> None:
         self.status = why
-        self._post, self._prior, self._marks = [], [], []
+        self._nodes.close()
+        self._nodes, self._marks = NodeStore(0), []
         self._open, self._F = None, None
 
     # -------------------------------------------------------------- the backward pass
@@ -137,7 +147,7 @@ class RtsRecorder:
         if not self.active:
             return None
         xs, Ps = _snapshot(ekf)
-        J = len(self._prior)
+        J = len(self._nodes)
         k = self.n_keep
         out_x = np.empty((len(self._marks), k))
         out_P = np.empty((len(self._marks), k, k))
@@ -151,8 +161,7 @@ class RtsRecorder:
                 m += 1
             if j == 0:
                 break
-            x_pr, P_pr, F, ang = self._prior[j - 1]
-            x_po, P_po = self._post[j - 1]
+            x_po, P_po, x_pr, P_pr, F, ang = self._nodes[j - 1]
             d = xs - x_pr
             d[ang] = (d[ang] + np.pi) % (2.0 * np.pi) - np.pi
             C = _gain(P_po @ F.T, P_pr)
@@ -160,7 +169,55 @@ class RtsRecorder:
             Ps = P_po + C @ (Ps - P_pr) @ C.T
             Ps = 0.5 * (Ps + Ps.T)
         self.status = "ok"
+        self._nodes.close()
         return SmoothedStates(out_x, out_P)
+
+
+class NodeStore:
+    """Append-only list of tuples of arrays: in memory up to ``ram_bytes``, the rest in an unnamed temporary file
+    (``tempfile.TemporaryFile``: gone when closed or when the process ends), read back by offset."""
+
+    def __init__(self, ram_bytes: float) -> None:
+        self.ram_bytes = float(ram_bytes)
+        self._mem: list[tuple] = []
+        self._ram = 0
+        self._file = None
+        self._index: list[tuple[int, tuple]] = []  # node len(_mem) + k: (file offset, (shape, dtype) per array)
+
+    def __len__(self) -> int:
+        return len(self._mem) + len(self._index)
+
+    def append(self, arrays: tuple) -> None:
+        size = sum(a.nbytes for a in arrays)
+        if self._file is None and self._ram + size <= self.ram_bytes:
+            self._mem.append(arrays)
+            self._ram += size
+            return
+        if self._file is None:
+            import tempfile
+
+            self._file = tempfile.TemporaryFile(prefix="semslam-smoother-")
+        self._file.seek(0, 2)
+        self._index.append((self._file.tell(), tuple((a.shape, a.dtype.str) for a in arrays)))
+        for a in arrays:  # raw bytes: the index keeps shapes and types (np.save's headers cost ~1 ms a node)
+            self._file.write(np.ascontiguousarray(a).tobytes())
+
+    def __getitem__(self, j: int) -> tuple:
+        if j < len(self._mem):
+            return self._mem[j]
+        offset, layout = self._index[j - len(self._mem)]
+        self._file.seek(offset)
+        out = []
+        for shape, dtype in layout:
+            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            out.append(np.frombuffer(self._file.read(n), dtype=dtype).reshape(shape).copy())
+        return tuple(out)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        self._mem, self._index = [], []
 
 
 def _snapshot(ekf) -> tuple[np.ndarray, np.ndarray]:

@@ -309,8 +309,7 @@ def test_recorded_pitch_flip_explains_the_covariance_change():
     pitch = ekf.landmark_pose(1)[4]
     assert abs(pitch) < np.pi / 2 and pitch == pytest.approx(np.pi - (np.radians(89.0) + 0.2), abs=0.02)
     rec.mark(ekf)
-    x_pr, P_pr, F, _ = rec._prior[-1]
-    _, P_po = rec._post[-1]
+    _, P_po, x_pr, P_pr, F, _ = rec._nodes[len(rec._nodes) - 1]
     J = np.ones(ekf.n)
     J[off + 4] = -1.0
     np.testing.assert_array_equal(np.diag(F), J)

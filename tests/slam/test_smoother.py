@@ -227,3 +227,23 @@ def test_recorder_defaults():
     """Catches a changed default memory budget (512 MB) or kept-state count (6: vehicle position and velocity)."""
     rec = RtsRecorder()
     assert rec.max_bytes == 512e6 and rec.n_keep == 6 and rec.status == "recording" and rec.active
+
+
+@pytest.mark.parametrize("ram_bytes", [0.0, 3e5])
+def test_history_in_a_temporary_file_smooths_bit_for_bit_like_in_memory(ram_bytes):
+    """The recorder's history all in a temporary file (ram_bytes 0), or half in memory and half on file: the same
+    smoothed states to the last bit as all in memory, and the temporary file is gone after the backward pass."""
+    ops = _script()
+    runs = {}
+    for key, budget in (("memory", 1e12), ("file", ram_bytes)):
+        ekf = _new_ekf()
+        ekf.recorder = RtsRecorder(n_keep=6, ram_bytes=budget)
+        _run(ops, ekf)
+        store = ekf.recorder._nodes
+        assert (store._file is not None) == (key == "file")
+        if key == "file" and ram_bytes:
+            assert 0 < len(store._mem) < len(store)
+        runs[key] = ekf.recorder.smooth(ekf)
+        assert ekf.recorder.status == "ok" and store._file is None
+    np.testing.assert_array_equal(runs["file"].x, runs["memory"].x)
+    np.testing.assert_array_equal(runs["file"].P, runs["memory"].P)
