@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .._memory import release_free_memory
 from ..detection import Detection
 from ..errors import InputError
 from ..slam import MODES, SlamConfig, SlamResult
@@ -191,6 +192,7 @@ class Runner:
             self._recognised(msg, *detect_scan(self.recognizer, msg.cloud, **kw))
 
     def _recognised(self, msg: Scan, dets, stats, result) -> None:
+        release_free_memory()  # a scan's arrays freed: the heap's free pages back to the system (semslam._memory)
         self.scans.append(stats)
         if self.on_scan is not None:
             self.on_scan(msg, dets, stats, result)
