@@ -182,6 +182,9 @@ class Runner:
                 if self._pool is None:
                     from concurrent.futures import ThreadPoolExecutor
 
+                    # set before any worker runs: changing OpenBLAS's thread count while another thread is inside
+                    # BLAS can crash (and so can restoring it: close() waits for the workers first)
+                    self._limit_blas()
                     self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
                 # its detections are stamped by its points: none before the first of them
                 first_s = msg.start_stamp_s if msg.point_stamps_s is None or not len(msg.point_stamps_s) else \
@@ -282,13 +285,32 @@ class Runner:
             return
         if self._in_flight:  # the filters take a scan's detections before passing its start
             self._collect(block_over=self.lookahead, before_s=limit)
-        if self._blas is None:  # the filter's matrices are small: BLAS threads only spin on them (6x slower, measured)
-            self._blas = threadpool_limits(limits=1, user_api="blas")
+        self._limit_blas()
         while self._heap and self._heap[0][0] <= limit:
             t, _, _, kind, p = heapq.heappop(self._heap)
             self._released = t
             for mode, s in self.sessions.items():
                 _feed(s, mode, kind, t, p)
+
+    def _limit_blas(self) -> None:
+        if self._blas is None:  # the filter's matrices are small: BLAS threads only spin on them (6x slower, measured)
+            self._blas = threadpool_limits(limits=1, user_api="blas")
+
+    def _stop_workers(self) -> None:
+        """Cancel the scans not yet started and wait for those in recognition (they hold no lock: short)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        self._in_flight = []
+
+    def close(self) -> None:
+        """Stop the recognition threads (waiting for the scans in recognition), then give BLAS its thread count
+        back. :meth:`finish` does it; call it when a run is abandoned (an exception, Ctrl-C) so that no worker is
+        left inside BLAS while the caller's own limits are restored."""
+        self._stop_workers()
+        if self._blas is not None:
+            self._blas.restore_original_limits()
+            self._blas = None
 
     # ------------------------------------------------------------------ output
     def finish(self) -> RunOutcome:
@@ -299,13 +321,14 @@ class Runner:
         self._finished = True
         try:
             self._collect(block_over=0)
-        finally:
-            if self._pool is not None:
-                self._pool.shutdown(wait=True, cancel_futures=True)
-                self._pool = None
+        except BaseException:
+            self.close()
+            raise
+        self._stop_workers()
         if self.start is None:
             self._try_start(final=True)
         if self.start is None:
+            self.close()
             raise InputError("The dive has no attitude sample: the filter needs the attitude as input.")
         try:
             self._release(final=True)
@@ -314,9 +337,7 @@ class Runner:
                 for mode, s in self.sessions.items():
                     results[mode] = with_start(s.finish(), self.start)
         finally:
-            if self._blas is not None:
-                self._blas.restore_original_limits()
-                self._blas = None
+            self.close()
         return RunOutcome(results, self.detections_by_scan, self.scans, self.start, self.counts)
 
 
@@ -343,8 +364,12 @@ def run_stream(dive, **runner_kw) -> RunOutcome:
     """Every message of an opened dive (:func:`semslam.run.open_dive`) through a :class:`Runner`. Not evaluated:
     :func:`semslam.evaluation.slam_run.evaluate_results` does that after the run, against a reference it loads."""
     runner = Runner(dive.vehicle, **runner_kw)
-    for msg in dive.messages():
-        runner.feed(msg)
+    try:
+        for msg in dive.messages():
+            runner.feed(msg)
+    except BaseException:  # an error or Ctrl-C: no recognition thread outlives the run
+        runner.close()
+        raise
     out = runner.finish()
     out.counts["source"] = dict(dive.counts)
     if dive.geodetic_origin is not None:

@@ -166,3 +166,39 @@ def test_lookahead_must_be_a_small_non_negative_integer(mission):
     for bad in (-1, 1.5, True, 65):
         with pytest.raises(InputError, match="lookahead"):
             Runner(mission.vehicle, modes=("dr",), lookahead=bad)
+
+
+def test_a_run_abandoned_mid_dive_stops_its_recognition_threads_before_the_error_leaves():
+    """The dive's reader fails after a few scans while scans are in recognition in background threads: when the
+    error reaches the caller no recognition thread is left running and BLAS has its thread count back (a worker
+    still inside BLAS while the caller restores its own limits crashed the process on Ctrl-C: SIGSEGV)."""
+    import threading
+
+    from threadpoolctl import threadpool_info
+
+    from semslam.pipeline import ScanRecognizer
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
+    from semslam.simulation.builtin_db import builtin_database
+    from semslam.simulation.config import ScannerConfig
+
+    ds = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
+                                                    scanner=ScannerConfig(n_lines=100, points_per_line=100)), seed=3)
+    rec = _Jittery(ScanRecognizer(builtin_database(seed=0), seed=0), slow=range(1000))  # every scan 0.6 s
+    dive = open_dive(ds)
+
+    class Failing:
+        vehicle, counts, geodetic_origin = dive.vehicle, dive.counts, dive.geodetic_origin
+
+        def messages(self):
+            n = 0
+            for m in dive.messages():
+                yield m
+                n += m.kind == "scan"
+                if n == 3:
+                    raise OSError("the disk went away")
+
+    blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    with pytest.raises(OSError, match="disk went away"):
+        run_stream(Failing(), modes=("pose",), recognizer=rec, lookahead=2)
+    assert not [t for t in threading.enumerate() if t.name.startswith("semslam-recognition") and t.is_alive()]
+    assert [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"] == blas
