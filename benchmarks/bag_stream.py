@@ -48,6 +48,7 @@ def main() -> None:
     made = json.loads(info.read_text())
     bag, t_sim_bag, size_mb, n_scans, n_points = (Path(made["bag"]), made["seconds"], made["size_mb"],
                                                   made["n_scans"], made["n_points"])
+    speed = machine_speed_s()
     t = time.perf_counter()
     cmd = [sys.executable, "-m", "semslam.cli.main", "run", str(bag), "--db", "builtin", "--mode", "pose",
            "--vehicle", str(work / "vehicle.toml"), "--topics", str(work / "topics.toml"), "--out", str(work / "run"),
@@ -68,11 +69,27 @@ def main() -> None:
     rss_mb = hwm_kb / 1024
     dive_s = one.duration_s * loops
     load = "%.2f %.2f %.2f" % os.getloadavg()
+    print(f"machine speed: a fixed numpy + Python loop took {speed:.2f} s before the run and {machine_speed_s():.2f} s "
+          "after (1.1-1.4 s on this machine's fast days; this shared VM's speed varies by up to 2x within an hour)")
     print(f"| dive (min) | scans | points | bag (MB, {made['format']}) | simulate + write bag (s) | semslam run (s) | "
           "real time | peak RSS (MB) | load after |")
     print("|---|---|---|---|---|---|---|---|---|")
     print(f"| {dive_s / 60:.1f} | {n_scans} | {n_points / 1e6:.1f} M | {size_mb:.0f} | {t_sim_bag:.0f} | {wall:.0f} | "
           f"{dive_s / wall:.1f}x | {rss_mb:.0f} | {load} |")
+
+
+def machine_speed_s() -> float:
+    """Seconds of a fixed numpy + pure-Python loop (the load average does not see a shared host's contention)."""
+    import numpy as np
+
+    a = np.random.default_rng(0).random((2000, 2000))
+    t = time.perf_counter()
+    for _ in range(5):
+        a @ a
+    x = 0
+    for i in range(3_000_000):
+        x += i
+    return time.perf_counter() - t
 
 
 def make_bag(work: Path, loops: int, lines: int, seed: int, fmt: str) -> dict:

@@ -5,6 +5,7 @@ scan arrival -> detections ready p50/p90, navigation arrival -> odometry publish
 navigation messages dropped; and the node process's CPU time and peak RSS (psutil). Needs ROS 1 (docs/ros1.md).
 
     .venv/bin/python benchmarks/ros_node.py [--work /tmp/semslam_ros_bench] [--rates 1 4] [--points 320]
+    .venv/bin/python benchmarks/ros_node.py --dive /tmp/bag30 --rates 2    # RSS over bag_stream's 30-min dive
 
 Everything started is stopped by PID (its process group); the load average is printed with every figure.
 """
@@ -108,8 +109,12 @@ def run_once(files: dict, rate: float, work: Path) -> dict:
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         procs.append(play)
         t0 = time.monotonic()
+        rss_trace = []  # (s since play started, RSS MB) every ~5 s: flat memory over a long bag
         while play.poll() is None:
-            rss_peak = max(rss_peak, ps.memory_info().rss)
+            rss = ps.memory_info().rss
+            rss_peak = max(rss_peak, rss)
+            if not rss_trace or time.monotonic() - t0 - rss_trace[-1][0] >= 5.0:
+                rss_trace.append((time.monotonic() - t0, rss / 2**20))
             time.sleep(0.2)
         wall = time.monotonic() - t0
         cpu = sum(ps.cpu_times()[:2]) - cpu0
@@ -123,7 +128,21 @@ def run_once(files: dict, rate: float, work: Path) -> dict:
             "rss_peak_mb": rss_peak / 2**20, **stats["latency"], "scans": stats["stats"]["messages"]["scan"],
             "scans_recognised": stats["stats"]["scans_recognised"], "scans_dropped": stats["stats"]["scans_dropped"],
             "scans_late": stats["stats"]["scans_late"], "dropped_late": stats["dropped_late"],
-            "navigation_errors": stats["stats"]["navigation_errors"], "verdict": verdict}
+            "navigation_errors": stats["stats"]["navigation_errors"], "verdict": verdict, "rss_trace": rss_trace}
+
+
+def rss_summary(trace: list) -> str:
+    """RSS at a quarter, half, three quarters and the end of the play, and the slope over the second half."""
+    import numpy as np
+
+    if len(trace) < 4:
+        return "RSS trace too short"
+    t, m = np.array(trace).T
+    at = [float(np.interp(f * t[-1], t, m)) for f in (0.25, 0.5, 0.75, 1.0)]
+    half = t >= t[-1] / 2
+    slope = float(np.polyfit(t[half], m[half], 1)[0]) * 600.0 if half.sum() >= 2 else float("nan")
+    return (f"RSS at 1/4, 1/2, 3/4, end of the play: {', '.join(f'{v:.0f}' for v in at)} MB; "
+            f"second half slope {slope:+.1f} MB per 10 min")
 
 
 def main() -> int:
@@ -131,10 +150,21 @@ def main() -> int:
     ap.add_argument("--work", default="/tmp/semslam_ros_bench")
     ap.add_argument("--rates", type=float, nargs="+", default=[1.0, 4.0])
     ap.add_argument("--points", type=int, default=320, help="scan lines = points per line (320: ~100k points)")
+    ap.add_argument("--dive", help="a directory with dive.bag, topics.toml and vehicle.toml (e.g. the 30-minute "
+                    "dive of `bag_stream.py --format ros1`) instead of the simulated 24 s dive")
     args = ap.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    files = make_dive(work, args.points)
+    if args.dive:
+        from semslam.recognition.storage import save_database
+        from semslam.simulation.builtin_db import builtin_database
+
+        d = Path(args.dive)
+        files = {"bag": d / "dive.bag", "topics": d / "topics.toml", "vehicle": d / "vehicle.toml",
+                 "db": work / "objects.npz"}
+        save_database(builtin_database(seed=0), files["db"])
+    else:
+        files = make_dive(work, args.points)
     for rate in args.rates:
         r = run_once(files, rate, work)
         print(f"-r {rate:g} ({_load()}): scan->detections p50 {r['scan_to_detections_p50_ms']:.0f} ms, "
@@ -143,6 +173,7 @@ def main() -> int:
               f"scans {r['scans_recognised']}/{r['scans']} recognised, {r['scans_dropped']} dropped (newest kept), "
               f"{r['scans_late']} late; messages dropped late {r['dropped_late']}; verdict {r['verdict']}; CPU {r['cpu_percent']:.0f} %, "
               f"peak RSS {r['rss_peak_mb']:.0f} MB")
+        print(rss_summary(r["rss_trace"]))
         print(json.dumps(r))
     return 0
 
