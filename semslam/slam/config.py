@@ -208,7 +208,7 @@ class OutputConfig:
     history_rate_hz: float = 2.0
     #: also estimate the trajectory from the whole mission (RTS smoother, offline; the filter is unchanged)
     smooth: bool = True
-    #: budget of the smoother's history (MB; the first 64 MB in memory, the rest in a temporary file: a 30-minute
+    #: budget of the smoother's history (MB; the first 16 MB in memory, the rest in a temporary file: a 30-minute
     #: dive with four landmarks needs ~0.8 GB): beyond it the smoothed trajectory is skipped, and metrics say so
     smoother_max_mb: float = 4096.0
 

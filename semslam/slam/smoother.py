@@ -64,7 +64,7 @@ class RtsRecorder:
         The part of the history kept in memory; the rest goes to a temporary file.
     """
 
-    def __init__(self, n_keep: int = 6, max_bytes: float = 512e6, ram_bytes: float = 64e6) -> None:
+    def __init__(self, n_keep: int = 6, max_bytes: float = 512e6, ram_bytes: float = 16e6) -> None:
         self.n_keep = int(n_keep)
         self.max_bytes = float(max_bytes)
         self.status = "recording"

@@ -224,9 +224,11 @@ def test_smoothed_states_are_compared_by_identity():
 
 
 def test_recorder_defaults():
-    """Catches a changed default memory budget (512 MB) or kept-state count (6: vehicle position and velocity)."""
+    """Catches a changed default budget (512 MB, of which 16 MB in memory) or kept-state count (6: vehicle
+    position and velocity)."""
     rec = RtsRecorder()
     assert rec.max_bytes == 512e6 and rec.n_keep == 6 and rec.status == "recording" and rec.active
+    assert rec._nodes.ram_bytes == 16e6
 
 
 @pytest.mark.parametrize("ram_bytes", [0.0, 3e5])
