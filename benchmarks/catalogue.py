@@ -60,7 +60,8 @@ from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig,
 from semslam.simulation.cad_models import models_view_clouds, with_resting_up
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
-from semslam.simulation.laser_views import LaserViewConfig, laser_view_clouds
+from semslam.simulation.laser_views import LaserViewConfig
+from semslam.simulation.model_database import sensor_view_clouds
 from semslam.simulation.occlusion import occlude_objects
 from semslam.segmentation import SegmentationConfig
 
@@ -110,15 +111,10 @@ def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, 
             cfg = dataclasses.replace(SURVEY_KINECT, elevation_rad=float(np.radians(el)))
             v, classes = models_view_clouds(models, seed=seed + i, config=cfg, n_views=n_views)
             views += [(lab, f"{vid}_el{el:g}", cloud) for lab, vid, cloud in v]
-    if "laser" in sensor:
-        lcfg = laser_config or LaserViewConfig()
-        v, classes = laser_view_clouds(models, seed=np.random.default_rng([seed, 7]), n_views=laser_views, config=lcfg)
+    if "laser" in sensor:  # as semslam db build --sensor laser renders them
+        v, classes = sensor_view_clouds(models, sensor="laser", seed=seed, laser=laser_config, laser_views=laser_views,
+                                        laser_cut_views=laser_cut_views)
         views += v
-        if laser_cut_views:
-            cut_cfg = dataclasses.replace(lcfg, along_sweep=1.0, allow_cut=True)
-            v, _ = laser_view_clouds(models, seed=np.random.default_rng([seed, 8]), n_views=laser_cut_views,
-                                     config=cut_cfg)
-            views += [(lab, f"{vid}_cut", cloud) for lab, vid, cloud in v]
     model_views, _ = models_view_clouds(models, seed=seed, config=POSE_MODEL_KINECT, tied_rests=True)
     return with_resting_up(build_database(views, classes, seed=seed, model_views=model_views), models)
 

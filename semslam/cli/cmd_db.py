@@ -9,8 +9,10 @@
 * ``semslam db build --models MODELS_DIR --out DB.npz``: your CAD models (STL, OBJ, PLY and a
   ``models.toml``, see :mod:`semslam.simulation.cad_models`) seen by the same camera, with the same options.
 * ``--sensor laser`` (or ``kinect+laser``) with ``--builtin``/``--models``: the recognition views are rendered by
-  the missions' laser scanner from route-like viewpoints instead of (or as well as) the Kinect-like camera
-  (:mod:`semslam.simulation.laser_views`); the pose-model views stay Kinect views.
+  a laser scanner from route-like viewpoints instead of (or as well as) the Kinect-like camera
+  (:mod:`semslam.simulation.model_database`): ``--laser-views`` whole views and ``--laser-cut-views`` views cut by
+  the swath's border per object; the pose-model views stay Kinect views. ``--vehicle FILE`` renders them with
+  that vehicle's scanner (mounting, field of view, lines, range) and makes ``laser`` the default.
 * ``semslam db info DB.npz``: classes, views per class, symmetry, size, descriptor settings, file version.
 """
 
@@ -72,16 +74,14 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     )
     build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
                        help="camera distance of the --builtin/--models views, metres (default 1.5; the papers ~0.7)")
-    build.add_argument("--sensor", default="kinect", choices=("kinect", "laser", "kinect+laser"),
-                       help="with --builtin/--models: the recognition views' sensor: the Kinect-like camera (default), "
-                            "the missions' laser scanner from route-like viewpoints (--n-views headings, "
-                            "semslam.simulation.laser_views), or both; the pose-model views stay Kinect views")
+    _add_sensor_options(build)
     build.add_argument(
         "--model-views",
         type=int,
-        default=8,
+        default=None,
         metavar="N",
-        help="pose-model views per object with --builtin/--models (default 8; 0: pose uses the recognition views)",
+        help="pose-model views per object with --builtin/--models (default 16 with the laser, 8 with the Kinect "
+             "alone; 0: pose uses the recognition views)",
     )
     build.add_argument("--model-elevation", type=float, default=60.0, metavar="DEG",
                        help="camera elevation of the --builtin/--models pose-model views, degrees (default 60)")
@@ -110,6 +110,22 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                                       "variants and file version of a database.")
     info.add_argument("db", metavar="DB", help="database file (.npz)")
     info.set_defaults(func=run_info)
+
+
+def _add_sensor_options(build: argparse.ArgumentParser) -> None:
+    """``--sensor``, ``--vehicle``, ``--laser-views``, ``--laser-cut-views`` of ``db build``."""
+    build.add_argument("--sensor", default=None, choices=("kinect", "laser", "kinect+laser"),
+                       help="with --builtin/--models: the recognition views' sensor: the Kinect-like camera (default "
+                            "without --vehicle), the laser scanner from route-like viewpoints (default with "
+                            "--vehicle; semslam.simulation.model_database), or both; the pose-model views stay "
+                            "Kinect views")
+    build.add_argument("--vehicle", metavar="FILE",
+                       help="with --builtin/--models: your vehicle file (vehicle.toml): its laser scanner (mounting, "
+                            "field of view, lines, range) renders the views; implies --sensor laser unless given")
+    build.add_argument("--laser-views", type=int, default=48, metavar="N",
+                       help="laser views per object whole in the swath, one heading every 360/N degrees (default 48)")
+    build.add_argument("--laser-cut-views", type=int, default=16, metavar="N",
+                       help="laser views per object that the swath's border may cut (default 16; 0: none)")
 
 
 def _usage(parser: argparse.ArgumentParser) -> int:
@@ -141,9 +157,7 @@ def run_build(args: argparse.Namespace) -> int:
         kwargs["mapper"] = partial(_dask_mapper, jobs=check_jobs(args.jobs), scheduler=args.scheduler)
     if (args.builtin or args.models is not None) and (args.fuse or args.up is not None):
         raise InputError("--fuse and --up are for a VIEWS_DIR of recorded views, not --builtin or --models.")
-    if args.sensor != "kinect" and not (args.builtin or args.models is not None):
-        raise InputError(f"--sensor {args.sensor} renders views of --builtin or --models objects; a VIEWS_DIR holds "
-                         "recorded views. Drop --sensor or use --builtin/--models.")
+    _resolve_sensor(args)
     if (args.builtin or args.models is not None) and args.sensor != "kinect":
         db, warned = _build_with_laser(args, kwargs)
         source = "builtin" if args.builtin else str(args.models)
@@ -205,44 +219,48 @@ def _dask_mapper(fn, items, progress, *, jobs: int, scheduler: str | None):
     return map_tasks(fn, items, jobs=jobs, scheduler=scheduler, progress=progress, desc="descriptors")
 
 
+def _resolve_sensor(args: argparse.Namespace) -> None:
+    """``args.sensor`` and ``args.model_views`` resolved from ``--vehicle`` (one-line errors for conflicts)."""
+    from ..errors import InputError
+
+    if args.sensor is None:
+        args.sensor = "laser" if args.vehicle is not None else "kinect"
+    if args.model_views is None:
+        args.model_views = 8 if args.sensor == "kinect" else 16
+    if args.vehicle is not None and args.sensor == "kinect":
+        raise InputError("--vehicle gives the laser scanner the views are rendered with; --sensor kinect renders none. "
+                         "Drop one of them.")
+    if args.vehicle is not None and not (args.builtin or args.models is not None):
+        raise InputError("--vehicle renders views of --builtin or --models objects; a VIEWS_DIR holds recorded views. "
+                         "Drop --vehicle or use --builtin/--models.")
+    if args.sensor != "kinect" and not (args.builtin or args.models is not None):
+        raise InputError(f"--sensor {args.sensor} renders views of --builtin or --models objects; a VIEWS_DIR holds "
+                         "recorded views. Drop --sensor or use --builtin/--models.")
+
+
 def _build_with_laser(args: argparse.Namespace, kwargs: dict):
-    """``--sensor laser|kinect+laser`` with ``--builtin``/``--models``: the database and the models' warnings."""
+    """``--sensor laser|kinect+laser`` (or ``--vehicle``) with ``--builtin``/``--models``: the database
+    (:func:`semslam.simulation.model_database.sensor_database`) and the models' warnings."""
     import math
 
-    from ..errors import InputError
-    from ..recognition import build_database
-    from ..simulation.cad_models import models_view_clouds, read_models
     from ..simulation.config import KinectConfig
-    from ..simulation.laser_views import laser_view_clouds
+    from ..simulation.model_database import scanner_from_vehicle, sensor_database
 
-    if args.model_views < 0:
-        raise InputError(f"The '--model-views' option must be >= 0. Got {args.model_views} instead.")
     if args.builtin:
         from ..simulation.objects import builtin_objects
 
         models, warned = builtin_objects(), []
     else:
+        from ..simulation.cad_models import read_models
+
         models, warned = _with_warnings(read_models, args.models)
-
-    def kinect_views(config: KinectConfig, n: int, tied: bool):  # as the Kinect-only paths render them
-        if args.builtin:
-            from ..simulation.kinect import builtin_view_clouds
-
-            return builtin_view_clouds(seed=args.seed, n_views=n, config=config)[0]
-        return models_view_clouds(models, seed=args.seed, n_views=n, config=config, progress=args.progress,
-                                  tied_rests=tied)[0]
-
-    views, classes = laser_view_clouds(models, seed=args.seed, n_views=args.n_views, progress=args.progress)
-    if args.sensor == "kinect+laser":
-        kinect = KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance)
-        views = kinect_views(kinect, args.n_views, False) + views
-    model_views = None
-    if args.model_views:
-        model_kinect = KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance)
-        model_views = kinect_views(model_kinect, args.model_views, True)
-    from ..simulation.cad_models import with_resting_up
-
-    return with_resting_up(build_database(views, classes, model_views=model_views, **kwargs), models), warned
+    scanner = None if args.vehicle is None else scanner_from_vehicle(args.vehicle)
+    db = sensor_database(
+        models, sensor=args.sensor, n_views=args.n_views, n_model_views=args.model_views,
+        kinect=KinectConfig(elevation_rad=math.radians(args.kinect_elevation), distance_m=args.kinect_distance),
+        model_kinect=KinectConfig(elevation_rad=math.radians(args.model_elevation), distance_m=args.model_distance),
+        scanner=scanner, laser_views=args.laser_views, laser_cut_views=args.laser_cut_views, **kwargs)
+    return db, warned
 
 
 def _build_from_models(args: argparse.Namespace, kwargs: dict):

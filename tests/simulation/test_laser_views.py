@@ -80,12 +80,14 @@ def test_db_build_models_with_the_laser(tmp_path, test_data, capsys):
 
     out = tmp_path / "laser.npz"
     assert main(["--json", "db", "build", "--models", str(test_data / "models"), "--sensor", "kinect+laser",
-                 "--n-views", "3", "--model-views", "2", "--out", str(out)]) == 0
+                 "--n-views", "3", "--laser-views", "3", "--laser-cut-views", "1", "--model-views", "2",
+                 "--out", str(out)]) == 0
     assert '"sensor": "kinect+laser"' in capsys.readouterr().out
     db = load_database(out)
-    assert db.n_views == 3 * 2 * len(db.classes)  # 3 Kinect + 3 laser views per class
+    assert db.n_views == (3 + 3 + 1) * len(db.classes)  # 3 Kinect + 3 whole laser views + 1 cut per class
     ids = [str(v) for v in db.view_ids]
-    assert sum("_laser_hdg" in v for v in ids) == 3 * len(db.classes)
+    assert sum("_laser_hdg" in v for v in ids) == 4 * len(db.classes)
+    assert sum(v.endswith("_cut") for v in ids) == len(db.classes)
     assert sorted(set(str(lab) for lab in db.labels)) == sorted(db.classes)
     assert all(len(db.pose_views(lab)) == 2 for lab in db.classes)
 
