@@ -67,6 +67,12 @@ class PipelineConfig:
         unreliable), ``"keep"`` ignores the test. The next scans see these objects whole.
     border_margin_rad : float
         Default 0.5 degree (~3 laser lines of the default scanner).
+    border_rotation_variance_rad2 : float
+        Added to the rotation variances of a pose fitted to a cluster cut by the border (``border="flag"``): part of
+        the object was not seen, so its orientation may be any that fits the part (the built-in elbow fitted turned
+        over, the hand wheel flipped): by default pi^2 / 3 rad^2, the variance of an angle uniform on a half-turn
+        either way -- the orientation is reported as unknown, the position as estimated. Such poses are also
+        flagged unreliable (the filter skips them unless ``keep_unreliable``).
     pose_model : {"fused", "view"}
         Align to the class's pose-model views fused in its canonical frame (default;
         :meth:`~semslam.recognition.ViewDatabase.pose_views`: the database's pose-model views when it stores
@@ -123,6 +129,7 @@ class PipelineConfig:
     size_reference: str = "box"
     border: str = "reject"
     border_margin_rad: float = float(np.radians(0.5))
+    border_rotation_variance_rad2: float = float(np.pi**2 / 3)
     pose_model: str = "fused"
     pose: PoseConfig = field(default_factory=PoseConfig)
     estimate_pose: bool = True
@@ -163,6 +170,7 @@ class PipelineConfig:
                 )
             object.__setattr__(self, "up_scanner", tuple(float(v) for v in up))
         check_positive("ambiguous_rotation_variance_rad2", self.ambiguous_rotation_variance_rad2, caller=c)
+        check_positive("border_rotation_variance_rad2", self.border_rotation_variance_rad2, caller=c, allow_zero=True)
         check_choice("descriptor", self.descriptor, ("esf", "vfh", "esf+vfh"), caller=c)
         check_choice("classifier", self.classifier, CLASSIFIERS, caller=c)
         check_choice("rejection", self.rejection, ("global", "per_class", "none"), caller=c)

@@ -126,6 +126,11 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
         cov = cov.copy()
         cov[3:, 3:] += np.eye(3) * cfg.ambiguous_rotation_variance_rad2
         extras["orientation_ambiguous"] = True
+    if hyp.touches_border and cfg.border_rotation_variance_rad2 > 0:
+        # fitted to the part of the object the scan saw: the orientation is unknown (PipelineConfig's docstring)
+        cov = cov.copy()
+        cov[3:, 3:] += np.eye(3) * cfg.border_rotation_variance_rad2
+        extras["orientation_unknown_border"] = True
     return Detection(label, hyp.match.distance, pose.T_scanner_object, cov, score_kind="chi2",
                      fitness=pose.fitness, rmse_m=pose.rmse_m, n_points=len(points),
                      reliable=bool((pose.reliable or ambiguous) and not hyp.touches_border),

@@ -81,6 +81,27 @@ def test_border_policy_flag_keeps_cut_objects_and_marks_them(db, mission):
     assert all(d.extras["touches_border"] and not d.reliable for d in result.detections)
 
 
+def test_a_pose_fitted_to_a_border_cut_cluster_reports_its_orientation_unknown(db, mission):
+    """The same ball valve, whole in the footprint, posed once as a whole cluster and once as if cut by the border:
+    the cut one's rotation variances grow by pi^2/3 (the orientation of a part may be any that fits it), its
+    position covariance and pose stay the same, and it is unreliable."""
+    record = mission.scans[17]  # the ball valve, whole, in the middle of the footprint
+    cloud = mission.load_scan(record.scan_id)
+    whole = ScanRecognizer(db, PipelineConfig(border="flag")).recognize(cloud, seed=1).detections
+    cut = ScanRecognizer(db, PipelineConfig(border="flag", border_margin_rad=np.radians(30))).recognize(
+        cloud, seed=1).detections
+    assert [d.label for d in whole] == [d.label for d in cut] == ["ball_valve"]
+    w, c = whole[0], cut[0]
+    assert not w.extras["touches_border"] and "orientation_unknown_border" not in w.extras
+    assert c.extras["touches_border"] and c.extras["orientation_unknown_border"] and not c.reliable
+    np.testing.assert_allclose(c.T_sensor_object.matrix, w.T_sensor_object.matrix)
+    np.testing.assert_allclose(c.covariance_6x6[:3, :3], w.covariance_6x6[:3, :3])
+    np.testing.assert_allclose(np.diag(c.covariance_6x6)[3:] - np.diag(w.covariance_6x6)[3:], np.pi**2 / 3)
+    off = ScanRecognizer(db, PipelineConfig(border="flag", border_margin_rad=np.radians(30),
+                                            border_rotation_variance_rad2=0.0)).recognize(cloud, seed=1).detections
+    np.testing.assert_allclose(off[0].covariance_6x6, w.covariance_6x6)
+
+
 def test_plausibility_helpers_against_analytic_cases():
     rng = np.random.default_rng(0)
     box = rng.uniform([-0.05, -0.02, -0.01], [0.05, 0.02, 0.01], size=(2000, 3))
