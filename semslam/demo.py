@@ -22,6 +22,7 @@ Run directory layout (every file written atomically)::
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import asdict, dataclass, field
@@ -65,6 +66,16 @@ class DemoConfig:
     models_dir : str, optional
         A folder of the user's CAD models (``models.toml`` and meshes, see ``semslam db build --models``): the
         database is built from them and they are the objects of the mission, instead of the built-in fittings.
+    db_sensor : {"kinect", "laser", "kinect+laser"}, optional
+        The sensor the recognition views of the database are rendered with
+        (:func:`semslam.simulation.model_database.sensor_database`). Default: the mission's laser scanner for
+        ``models_dir`` (a database matched to the sensor), the papers' Kinect views for the built-in fittings.
+    preset : str, optional
+        The scan pipeline's named preset (:data:`semslam.run.config.PRESETS`; default: the ``config_file``'s, else
+        ``"default"``); its descriptor and classifier are ``descriptor`` and ``classifier``.
+    config_file : str, optional
+        A run configuration file (``docs/configuration.md``) on top of ``preset``: its ``pipeline`` section is the
+        scan pipeline's.
     """
 
     seed: int = 0
@@ -76,8 +87,22 @@ class DemoConfig:
     classifier: str = "chi2"
     extras: dict = field(default_factory=dict)
     models_dir: str | None = None
+    db_sensor: str | None = None
+    preset: str | None = None
+    config_file: str | None = None
 
     def __post_init__(self) -> None:
+        from .run.config import PRESETS
+        from .simulation.model_database import DB_SENSORS
+
+        if self.db_sensor is None:
+            object.__setattr__(self, "db_sensor", "kinect" if self.models_dir is None else "laser")
+        if self.db_sensor not in DB_SENSORS:
+            raise InputError(f"The 'db_sensor' argument of DemoConfig must be one of {DB_SENSORS}. "
+                             f"Got {self.db_sensor!r} instead.")
+        if self.preset is not None and self.preset not in PRESETS:
+            raise InputError(f"The 'preset' argument of DemoConfig must be one of {tuple(PRESETS)}. "
+                             f"Got {self.preset!r} instead.")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise InputError(
                 f"The 'seed' argument of DemoConfig must be a non-negative integer. Got {self.seed!r} instead."
@@ -182,7 +207,16 @@ def _database_stage(stages: "_Stages", cfg: DemoConfig, objects, out: Path, prog
     from .simulation import builtin_view_clouds
     from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 
-    if objects is None:
+    if cfg.db_sensor != "kinect":
+        from .simulation.model_database import sensor_database
+        from .simulation.objects import builtin_objects
+
+        from .simulation import SimulatorConfig
+
+        db = stages.run(f"render and describe database views ({cfg.db_sensor}, the mission's scanner)",
+                        sensor_database, builtin_objects() if objects is None else objects, sensor=cfg.db_sensor,
+                        seed=cfg.seed, scanner=SimulatorConfig().scanner, progress=progress)
+    elif objects is None:
         views, classes = stages.run("acquire database views (Kinect-like, survey geometry)", builtin_view_clouds,
                                     seed=cfg.seed, config=SURVEY_KINECT)
         model_views, _ = stages.run("acquire pose-model views (Kinect-like, 60 deg, 0.7 m)", builtin_view_clouds,
@@ -195,8 +229,9 @@ def _database_stage(stages: "_Stages", cfg: DemoConfig, objects, out: Path, prog
         model_views, _ = stages.run("acquire pose-model views of your models (Kinect-like, 60 deg, 0.7 m)",
                                     models_view_clouds, objects, seed=cfg.seed, config=POSE_MODEL_KINECT,
                                     tied_rests=True)
-    db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
-                    model_views=model_views, progress=progress)
+    if cfg.db_sensor == "kinect":
+        db = stages.run("describe database views (ESF, VFH)", build_database, views, classes, seed=cfg.seed,
+                        model_views=model_views, progress=progress)
     save_database(db, out / "db.npz")
     evaluations = {}
     for descriptor in ("esf", "vfh"):
@@ -230,7 +265,7 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     scored against the simulator's truth as it passes (a separate pass: the estimate never sees it), every mode in
     one pass; detections.jsonl, recognition.json, the Fig. 3 scan and each mode's run directory written."""
     from ._progress import progress_steps
-    from .pipeline import PipelineConfig, ScanRecognizer
+    from .pipeline import ScanRecognizer
     from .run import open_dive, run_stream
     from .run.runner import LOOKAHEAD
     from .simulation.truth_slam import builtin_symmetries
@@ -238,7 +273,10 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     from .run.rundir import write_run
     from .run.rundir import DETECTIONS, mode_dir
 
-    pipe_cfg = PipelineConfig(descriptor=cfg.descriptor, classifier=cfg.classifier)
+    from .run.config import load_run_config
+
+    run_cfg = load_run_config(cfg.config_file, preset=cfg.preset)
+    pipe_cfg = dataclasses.replace(run_cfg.pipeline_config(), descriptor=cfg.descriptor, classifier=cfg.classifier)
     recognizer = ScanRecognizer(db, pipe_cfg, seed=cfg.seed)
     recognizer.warm_up()
     records: list[dict] = []
@@ -253,7 +291,8 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
 
         symmetries = builtin_symmetries() if symmetries is None else symmetries
         found = run_stream(open_dive(mission), modes=tuple(cfg.modes), recognizer=recognizer, symmetries=symmetries,
-                           seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score, lookahead=LOOKAHEAD)
+                           seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score, lookahead=LOOKAHEAD,
+                           up_from_attitude=run_cfg.run.up_from_attitude)
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})

@@ -48,8 +48,8 @@ def add_config_options(p, what: str = "the pipeline and the filter") -> None:
     """``--config FILE`` / ``--preset NAME`` (semslam.run.config; docs/configuration.md)."""
     p.add_argument("--config", metavar="FILE", help=f"TOML or JSON settings of {what}: [pipeline], [slam] and [run] "
                                                     "tables (older [slam]/[pipeline] files too); docs/configuration.md")
-    p.add_argument("--preset", metavar="NAME", help="named settings to start from: default, cluttered, depth-camera "
-                                                    "(a --config file overrides them)")
+    p.add_argument("--preset", metavar="NAME", help="named settings to start from: default, cluttered, seabed, "
+                                                    "depth-camera (a --config file overrides them)")
 
 
 def run_config_from_args(args, *, default_modes: tuple | None = None):

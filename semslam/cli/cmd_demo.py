@@ -6,6 +6,8 @@ import argparse
 
 
 def register(sub, common) -> None:
+    from ._inputs import add_config_options
+
     p = sub.add_parser(
         "demo",
         parents=[common],
@@ -29,6 +31,9 @@ def register(sub, common) -> None:
         help="your CAD models (models.toml + STL/OBJ/PLY/DAE/glTF/STEP, as for 'db build --models'): the database and the "
         "mission's objects are yours instead of the built-in fittings",
     )
+    p.add_argument("--db-sensor", choices=("laser", "kinect", "kinect+laser"), default=None,
+                   help="the sensor the database views are rendered with (default: the demo's, see semslam.demo)")
+    add_config_options(p, "the pipeline")
     p.set_defaults(func=run)
 
 
@@ -38,7 +43,9 @@ def run(args: argparse.Namespace) -> int:
     from ..demo import DemoConfig, run_demo
     from ._output import emit
 
-    cfg = DemoConfig(seed=args.seed, quick=args.quick, loops=args.loops, models_dir=args.models)
+    over = {} if args.db_sensor is None else {"db_sensor": args.db_sensor}
+    cfg = DemoConfig(seed=args.seed, quick=args.quick, loops=args.loops, models_dir=args.models, preset=args.preset,
+                     config_file=args.config, **over)
     quiet = getattr(args, "json", False)
     log = (lambda s: None) if quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     metrics = run_demo(args.out, cfg, progress=not (args.no_progress or quiet), log=log, overwrite=args.overwrite)

@@ -2,7 +2,7 @@
 
 A TOML (or JSON) file with up to three sections and an optional preset (``docs/configuration.md``)::
 
-    preset = "cluttered"            # default | cluttered | depth-camera (see PRESETS); the file's values override it
+    preset = "cluttered"            # default | cluttered | seabed | depth-camera (PRESETS); the file overrides it
 
     [pipeline]                      # the scan pipeline: semslam.pipeline.PipelineConfig's fields
     reject_margin = 2.0
@@ -150,6 +150,14 @@ PRESETS: dict[str, dict] = {
     # verified against the scene, sizes along principal axes, part-based unions
     "cluttered": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                "size_reference": "principal", "parts": {}, "verify_visibility_image": "border"}},
+    # objects resting on the seabed (their most probable resting pose, gravity from the AHRS), beside structure and
+    # cut by the swath's border, among clutter: "cluttered" plus a second plane removed (a wall, a slope: an object
+    # beside it is otherwise one cluster with it) and the pose search kept upright (half-turn flips resolved).
+    # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
+    "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
+                            "size_reference": "principal", "parts": {}, "verify_visibility_image": "border",
+                            "segmentation": {"max_planes": 2}},
+               "run": {"up_from_attitude": True}},
     # a RealSense/Kinect frame ~30 cm from the object (docs/depth-camera.md):
     # --max-range 0.5 --voxel auto --cluster-tolerance auto --max-planes 0 --up 0,-1,0 --reject-margin 1
     "depth-camera": {"pipeline": {"segmentation": {"drop_origin": True, "max_range_m": 0.5, "voxel_leaf_m": "auto",

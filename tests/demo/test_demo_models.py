@@ -17,7 +17,8 @@ MODELS = Path(__file__).parents[1] / "data" / "models"
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo_models") / "run"
-    assert main(["demo", "--quick", "--models", str(MODELS), "--out", str(out), "--no-progress", "--seed", "1"]) == 0
+    assert main(["demo", "--quick", "--models", str(MODELS), "--out", str(out), "--no-progress", "--seed", "1",
+                 "--preset", "seabed"]) == 0
     return out
 
 
@@ -28,6 +29,18 @@ def test_the_database_and_the_mission_are_the_users_models(run):
     assert "reducing_socket" not in objects
     loo = json.loads((run / "evaluation" / "loo_esf_svm.json").read_text())
     assert sorted(loo["labels"]) == ["ball_valve", "elbow", "reducing_tee"]
+
+
+def test_the_users_models_are_rendered_by_the_missions_laser_with_the_preset_asked(run):
+    """The database matches the sensor that looks for the parts (laser views, whole and cut by the swath's border),
+    and the run's configuration is the named preset's."""
+    from semslam.recognition import load_database
+
+    ids = [str(v) for v in load_database(run / "db.npz").view_ids]
+    assert all("_laser_hdg" in v for v in ids) and any(v.endswith("_cut") for v in ids)
+    config = json.loads((run / "config.json").read_text())
+    assert config["demo"]["db_sensor"] == "laser" and config["demo"]["preset"] == "seabed"
+    assert config["pipeline"]["segmentation"]["max_planes"] == 2 and config["pipeline"]["border"] == "flag"
 
 
 def test_the_users_parts_are_recognised_and_mapped(run):

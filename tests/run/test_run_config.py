@@ -3,6 +3,8 @@ the resolved configuration a run writes, and the commands' --config / --preset."
 
 from __future__ import annotations
 
+import dataclasses
+
 import importlib.util
 import json
 import math
@@ -56,7 +58,17 @@ def test_depth_camera_preset_is_the_readme_frame_recipe():
                                                   cluster_tolerance_m="auto", max_planes=0)
     assert got.up_scanner == (0.0, -1.0, 0.0) and got.reject_margin == 1.0
     assert got.verify_min_fitness is None and got.parts is None  # nothing of the cluttered recipe
-    assert sorted(PRESETS) == ["cluttered", "default", "depth-camera"]
+    assert sorted(PRESETS) == ["cluttered", "default", "depth-camera", "seabed"]
+
+
+def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
+    """objects resting on the seabed beside structure: the cluttered recipe, a wall or slope removed as a second
+    plane, the pose kept upright with the AHRS's gravity (docs/configuration.md)."""
+    seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
+    p, c = seabed.pipeline_config(), cluttered.pipeline_config()
+    assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
+    assert dataclasses.replace(p, segmentation=c.segmentation) == c
+    assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
 def test_a_file_overrides_its_preset_and_the_command_lines_preset_must_agree(tmp_path):
@@ -161,9 +173,13 @@ def test_the_documented_file_and_preset_blocks_load_and_match_the_presets():
 
     text = (ROOT / "docs" / "configuration.md").read_text()
     blocks = [tomllib.loads(b) for b in re.findall(r"```toml\n(.*?)```", text, re.S)]
-    example, cluttered, depth = blocks
+    example, cluttered, seabed, depth = blocks
     assert RunConfig.from_dict(example, source="the example").run.modes == ("pose", "pose+heading")
     assert RunConfig.from_dict(cluttered).pipeline_config() == load_run_config(preset="cluttered").pipeline_config()
+    # seabed is shown as what it adds to cluttered
+    both = RunConfig.from_dict({"pipeline": {**cluttered["pipeline"], **seabed["pipeline"]}, "run": seabed["run"]})
+    assert both.pipeline_config() == load_run_config(preset="seabed").pipeline_config()
+    assert both.run == load_run_config(preset="seabed").run
     assert RunConfig.from_dict(depth).pipeline_config() == load_run_config(preset="depth-camera").pipeline_config()
 
 
