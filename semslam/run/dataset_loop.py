@@ -1,14 +1,16 @@
-"""Run the semantic EKF over a whole dataset: a short loop feeding a :class:`~semslam.slam.session.SlamSession`
-with the time-ordered merge of the dataset's logs and the given detections, then the evaluation pass against
-the dataset's ground truth when it has one. The run's start comes from the dive's own data
-(:mod:`semslam.slam.initial`), never from its truth: the same dive with or without truth gives the same estimate."""
+"""Run the semantic EKF over a whole dataset in memory: :func:`run_slam` feeds the dataset's logs and the given
+detections through the streaming runner of ``semslam run`` (:class:`semslam.run.runner.Runner`), then evaluates
+against the dataset's ground truth when it has one. The run's start comes from the dive's own data
+(:mod:`semslam.slam.initial`), never from its truth: the same dive with or without truth gives the same estimate.
+
+:func:`merged_messages` and :func:`feed_message` step a session by hand, message by message, in the runner's
+processing order (to look at the filter between two messages)."""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
-from threadpoolctl import threadpool_limits
 
 from .._validation import check_choice
 from ..dataset import Dataset
@@ -18,7 +20,7 @@ from ..symmetry import Symmetry
 from ..slam.config import MODES, SlamConfig
 from ..evaluation.slam_run import evaluate_run
 from ..modes import BACKENDS
-from ..slam.initial import InitialState, initial_state_of
+from ..slam.initial import InitialState
 from ..slam.results import SlamResult
 from ..slam.session import SlamSession
 from ..slam.survey import Survey
@@ -108,19 +110,14 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
         raise SlamError(f"The 'dataset' argument of run_slam must be a Dataset. Got {type(dataset).__name__} instead.")
     if len(dataset.attitude) == 0:
         raise SlamError("The dataset has no attitude samples: the filter needs the attitude as input.")
-    cfg = SlamConfig() if config is None else config
-    start = initial_state_of(dataset, cfg)
-    session = make_session(dataset.vehicle, start, mode=mode, config=cfg, symmetries=symmetries, backend=backend,
-                           huber_k=huber_k)
-    if survey is not None:
-        survey.add_to(session)
-    # the filter's matrices are small: BLAS threads only spin on them (6x slower on 2 busy cores, measured)
-    with threadpool_limits(limits=1, user_api="blas"):
-        for t, kind, payload in merged_messages(dataset, (detections_by_scan or {}) if mode != "dr" else {}):
-            feed_message(session, t, kind, payload)
-        result = session.finish()
-    result = with_start(result, start)
-    return evaluate_run(result, dataset, symmetries)
+    from .runner import run_stream  # the runner builds its sessions with make_session below
+    from .sources import open_dive
+
+    # the streaming runner of `semslam run`, fed from the dataset in memory: one loop for every entry point
+    outcome = run_stream(open_dive(dataset, scans=False), modes=(mode,), config=config, symmetries=symmetries,
+                         backend=backend, huber_k=huber_k, survey=survey,
+                         detections_by_scan=(detections_by_scan or {}) if mode != "dr" else {})
+    return evaluate_run(outcome.results[mode], dataset, symmetries)
 
 
 def make_session(vehicle, start: InitialState, *, mode: str, config: SlamConfig, symmetries=None,

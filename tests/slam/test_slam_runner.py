@@ -11,7 +11,7 @@ import pytest
 
 from semslam.cli.main import main
 from semslam.simulation.truth_slam import run_truth_slam
-from semslam.errors import SlamError
+from semslam.errors import InputError
 from semslam.geometry import rotation_from_rpy
 from semslam.slam import _ekf_kernels as kern
 from semslam.slam.consensus import (
@@ -182,7 +182,7 @@ def test_each_detection_is_processed_at_its_own_stamp(mission):
     np.testing.assert_allclose(b.position_ned_m, a.position_ned_m, atol=1e-12)
     assert b.metrics["landmark_updates"] == a.metrics["landmark_updates"]
     bad = {ids[0]: [replace(dets[ids[0]][0], stamp_s=float("nan"))]}
-    with pytest.raises(SlamError, match="stamp_s"):
+    with pytest.raises(InputError, match=f"finite 'stamp_s'. Got nan in scan {ids[0]}"):
         run_slam(mission, bad, mode="pose", symmetries={})
 
 
