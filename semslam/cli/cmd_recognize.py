@@ -193,12 +193,12 @@ def run(args: argparse.Namespace) -> int:
     t_db = (time.perf_counter() - t0) * 1e3
     notes = []
     if config.up_scanner is not None:
-        no_up = [c for c in db.classes if db.up_object(c) is None]
+        no_up = [c for c in db.classes if db.up_objects(c) is None]
         if no_up:
             notes.append(
                 f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
-                f"{'it' if len(no_up) == 1 else 'them'} (a model that rests on either of two faces has none; for your "
-                "scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
+                f"{'it' if len(no_up) == 1 else 'them'} (a database of models built before 2026-11-28 has none for "
+                "a model that rests on either of two faces; for your scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
                 "their pose search spans all orientations"
             )
     scan = read_point_cloud(args.scene)

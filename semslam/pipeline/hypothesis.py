@@ -106,7 +106,7 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     model = rec.pose_model(label, hyp.view_index)
     points = scan.points_xyz_m[raw_idx] if len(raw_idx) else hyp.cloud.points_xyz_m
     up_scanner = ctx.up_scanner
-    up_object = rec.db.up_object(label) if up_scanner is not None else None
+    up_object = rec.db.up_objects(label) if up_scanner is not None else None  # one up, or both ways of a tied rest
     extras["pose_upright"] = up_object is not None
     pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=cfg.pose, seed=seed,
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object

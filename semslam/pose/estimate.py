@@ -157,7 +157,9 @@ def estimate_object_pose(
         object frame (recorded by ``db build --fuse --up``). Given both, the grid search scans only
         orientations that keep them within a few degrees of each other
         (:func:`~semslam.registration.upright.upright_rotations`) instead of all of SO(3): an object cannot be
-        found upside down.
+        found upside down. ``up_object`` may be several directions (k, 3): a part that rests on either face;
+        the orientations keeping any of them up are scanned, and a near-equal fit of another one makes the
+        pose ambiguous.
 
     Returns
     -------
@@ -244,7 +246,13 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
         if up_scanner is None or up_object is None:
             raise InputError(f"{_CALLER} needs both 'up_scanner' and 'up_object' (or neither). "
                              f"Got up_scanner={up_scanner!r}, up_object={up_object!r}.")
-        upright = upright_rotations(up_scanner, up_object, caller=_CALLER)
+        ups = np.asarray(up_object, dtype=float)
+        ups = ups.reshape(1, -1) if ups.ndim == 1 else ups
+        if ups.ndim != 2 or ups.shape[1] != 3 or not len(ups):
+            raise InputError(f"The 'up_object' argument of {_CALLER} must be a 3-vector or a list of them. "
+                             f"Got shape {np.shape(up_object)} instead.")
+        # several possible ups (a part that rests on either face): the orientations keeping any of them up
+        upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
     fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright)
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 

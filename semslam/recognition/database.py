@@ -201,6 +201,16 @@ class ViewDatabase:
             up = ((self.params.get("fusion") or {}).get(label) or {}).get("up_object")
         return None if up is None else [float(v) for v in up]
 
+    def up_objects(self, label: str) -> list | None:
+        """The class's possible up directions in its object frame: ``[up]`` when :meth:`up_object` records one,
+        the up of each of two about equally probable resting poses when the database records them
+        (``params["up_object_tied"]``: a part that lies on either face), else None."""
+        up = self.up_object(label)
+        if up is not None:
+            return [up]
+        tied = (self.params.get("up_object_tied") or {}).get(label)
+        return None if not tied else [[float(v) for v in u] for u in tied]
+
     def views_of(self, label: str) -> np.ndarray:
         """Indices of the views of class ``label`` (int array)."""
         self.class_info(label)

@@ -91,11 +91,32 @@ def resting_up_objects(models: dict) -> dict[str, list]:
     return out
 
 
+def tied_up_objects(models: dict) -> dict[str, list]:
+    """``{label: [up_0, up_1]}`` for the classes that :func:`resting_up_objects` leaves out because two resting poses
+    are about equally probable (a part that lies on either face): the up direction of each, in the object frame.
+    Recorded as ``params["up_object_tied"]`` (:meth:`~semslam.recognition.ViewDatabase.up_objects`), it lets the
+    pose search consider both ways up and no other (and report a near-equal flip between them as ambiguous)."""
+    out = {}
+    for label, model in models.items():
+        rests = _tied_rests(model)
+        if len(rests) < 2:
+            continue
+        ups = []
+        for r in rests:
+            up = np.asarray(model.resting_poses[r], dtype=float)[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+            ups.append([float(v) for v in up / np.linalg.norm(up)])
+        out[label] = ups
+    return out
+
+
 def with_resting_up(db: Any, models: dict) -> Any:
-    """``db`` with :func:`resting_up_objects` of ``models`` recorded in its ``params["up_object"]``."""
+    """``db`` with :func:`resting_up_objects` of ``models`` recorded in its ``params["up_object"]`` and
+    :func:`tied_up_objects` in ``params["up_object_tied"]``."""
     ups = {k: v for k, v in resting_up_objects(models).items() if k in db.classes}
-    if ups:
-        object.__setattr__(db, "params", {**db.params, "up_object": ups})
+    tied = {k: v for k, v in tied_up_objects(models).items() if k in db.classes}
+    extra = ({"up_object": ups} if ups else {}) | ({"up_object_tied": tied} if tied else {})
+    if extra:
+        object.__setattr__(db, "params", {**db.params, **extra})
     return db
 
 

@@ -95,13 +95,26 @@ def test_out_naming_a_directory_fails_before_the_work(scene, tmp_path, capsys):
     assert len(lines) == 1 and "'--out'" in lines[0] and str(tmp_path) in lines[0]
 
 
-def test_up_without_a_recorded_up_direction_is_said_not_silently_ignored(scene, cache, capsys):
+def test_up_without_a_recorded_up_direction_is_said_not_silently_ignored(scene, cache, tmp_path, capsys):
     """`--up` keeps a pose upright only for classes whose database records their up direction (`db build --fuse
-    --up`, or a model's single most probable resting pose); the built-in database records it for the reducing
-    socket only (the others rest on either of two faces). Catches the option silently doing nothing."""
+    --up`, a model's most probable resting pose, or both of two tied ones); the built-in database records one for
+    every class (the socket's, the others' two ways up). A database without them (an older one, views of your own
+    without --up) gets a note naming the classes. Catches the option silently doing nothing."""
+    import dataclasses
+
+    from semslam.recognition import save_database
+    from semslam.simulation.builtin_db import builtin_database
+
     assert main(["recognize", str(scene), "--db", "builtin", "--no-pose", "--up", "0,-1,0", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["notes"] == []
+    db = builtin_database(seed=0)
+    bare = {k: v for k, v in db.params.items() if k not in ("up_object", "up_object_tied")}
+    save_database(dataclasses.replace(db, params=bare), tmp_path / "no_up.npz")
+    assert main(["recognize", str(scene), "--db", str(tmp_path / "no_up.npz"), "--no-pose", "--up", "0,-1,0",
+                 "--json"]) == 0
     notes = json.loads(capsys.readouterr().out)["notes"]
-    assert len(notes) == 1 and notes[0].startswith("--up is not used for ball_valve, elbow, reducing_tee:")
+    assert len(notes) == 1 and notes[0].startswith("--up is not used for ball_valve, elbow, reducing_socket, "
+                                                   "reducing_tee:")
     assert main(["recognize", str(scene), "--db", "builtin", "--no-pose"]) == 0
     assert "--up is not used" not in capsys.readouterr().out
 

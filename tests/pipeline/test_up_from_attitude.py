@@ -126,6 +126,7 @@ def test_model_databases_record_the_resting_up_of_untied_classes(tmp_path):
     (``R_rest_object^T (0, 0, 1)``), except classes that rest on either of two faces; the pipeline then poses them
     upright when the scan's up is given."""
     from semslam.simulation.cad_models import _tied_rests, resting_up_objects, with_resting_up
+    from semslam.simulation.model_views import tied_up_objects
     from semslam.simulation.catalogue import catalogue_objects
 
     models = catalogue_objects()
@@ -142,7 +143,15 @@ def test_model_databases_record_the_resting_up_of_untied_classes(tmp_path):
 
     expected = resting_up_objects(builtin_objects())
     assert db.params["up_object"] == expected and expected  # saved and read back
+    tied = tied_up_objects(builtin_objects())
+    assert db.params["up_object_tied"] == tied and set(tied) | set(expected) == set(db.classes)
     for label in db.classes:
         assert db.up_object(label) == expected.get(label)
+        # one up, or both ways up of a part that rests on either face, each up in its rest's frame
+        assert db.up_objects(label) == ([expected[label]] if label in expected else tied[label])
+    for label, pair in tied.items():
+        for r, up in zip(_tied_rests(builtin_objects()[label]), pair):
+            R = np.asarray(builtin_objects()[label].resting_poses[r])[:3, :3]
+            np.testing.assert_allclose(R @ up, [0.0, 0.0, 1.0], atol=1e-12)
     empty = with_resting_up(db, {})
     assert empty.params["up_object"] == expected  # nothing to add: unchanged

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from semslam.detection import Detection
-from semslam.errors import RegistrationError
+from semslam.errors import InputError, RegistrationError
 from semslam.geometry import rpy_from_rotation, wrap_angle
 from semslam.pose import estimate_object_pose, prepare_pose_model
 from semslam.simulation.scan_sim import mesh_model_cloud, resting_scene_pose, scan_mesh
@@ -172,3 +172,24 @@ def test_coarse_to_fine_grid_finds_the_exhaustive_grid_pose(objects, models):
     b = estimate_object_pose(scan, exhaustive, symmetry=obj.symmetry)
     assert obj.symmetry.rotation_error_rad(a.T_scanner_object.rotation, b.T_scanner_object.rotation) < np.radians(2.0)
     np.testing.assert_allclose(a.T_scanner_object.translation_m, b.T_scanner_object.translation_m, atol=0.002)
+
+
+def test_a_part_lying_on_its_other_face_is_found_with_both_ups_and_not_with_one(objects, models):
+    """The elbow rests on either face about equally often (two tied resting poses): the database records both ups
+    (``tied_up_objects``) and the upright search scans the orientations keeping either of them up. Seen lying on
+    its second face, it is found with both ups given; constrained to the first face's up alone, it cannot be."""
+    from semslam.simulation.model_views import tied_up_objects
+
+    obj, model = objects["elbow"], models["elbow"]
+    ups = tied_up_objects({"elbow": obj})["elbow"]
+    rng = np.random.default_rng(5)
+    T = resting_scene_pose(obj.resting_poses[1], 1.0, seed=rng)
+    pts = scan_mesh(obj.mesh, T, n_target_points=3000, range_noise_m=0.001, seed=rng)
+    up_scanner = T[:3, :3] @ np.asarray(ups[1])  # the world's up seen from the scanner
+    both = estimate_object_pose(pts, model, symmetry=obj.symmetry, up_scanner=up_scanner, up_object=ups)
+    r_both, t_both, _ = _errors(obj, both, T)
+    assert np.degrees(r_both) < 5.0 and t_both < 0.005 and both.extras["upright"]
+    one = estimate_object_pose(pts, model, symmetry=obj.symmetry, up_scanner=up_scanner, up_object=ups[0])
+    assert np.degrees(_errors(obj, one, T)[0]) > 30.0
+    with pytest.raises(InputError, match="up_object"):
+        estimate_object_pose(pts, model, up_scanner=up_scanner, up_object=[[0.0, 1.0]])
