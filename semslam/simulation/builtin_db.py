@@ -51,7 +51,7 @@ def builtin_database(*, seed: int = 0, n_views: int = 8, n_model_views: int = 8,
               "model_kinect": POSE_MODEL_KINECT.to_dict(), "n_model_views": int(n_model_views),
               "n_views": int(n_views), "seed": int(seed), "normal_radius_m": DEFAULT_NORMAL_RADIUS_M,
               "voxel_leaf_m": DEFAULT_VOXEL_LEAF_M, "esf_n_samples": 20000, "vfh_variant": None,
-              "vfh_arithmetic": "float32 as PCL 1.13", "resting_up": 1,
+              "vfh_arithmetic": "float32 as PCL 1.13", "resting_up": 2,  # 2: the ups of tied rests too
               **kwargs}  # a change of the descriptors (or of what the database records) renews the cache
     key = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
     path = cache_dir() / f"builtin_db_{key}.npz"

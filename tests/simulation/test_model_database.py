@@ -77,9 +77,9 @@ def test_sensor_database_records_views_pose_views_and_resting_up():
     two = {k: objects[k] for k in ("reducing_tee", "reducing_socket")}
     db = sensor_database(two, seed=0, laser_views=3, laser_cut_views=1, n_model_views=2)
     assert db.n_views == 8 and all(len(db.pose_views(k)) == 2 for k in two)
-    # the socket rests on one face: its up is recorded; the tee lies on either face: none
+    # the socket rests on one face: its up is recorded; the tee lies on either face: both ways up
     np.testing.assert_allclose(db.up_object("reducing_socket"), [0.0, 0.0, 1.0], atol=1e-9)
-    assert db.up_object("reducing_tee") is None
+    assert db.up_object("reducing_tee") is None and len(db.up_objects("reducing_tee")) == 2
 
 
 def test_db_build_with_a_vehicle_file_renders_its_laser(tmp_path, capsys):
