@@ -198,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
             notes.append(
                 f"--up is not used for {', '.join(no_up)}: the database records no up direction for "
                 f"{'it' if len(no_up) == 1 else 'them'} (a database of models built before 2026-11-28 has none for "
-                "a model that rests on either of two faces; for your scans: 'semslam db build VIEWS --fuse --up X,Y,Z'); "
+                "a model that rests on either of two faces; for your scans: "
+                "'semslam db build VIEWS --fuse --up X,Y,Z'); "
                 "their pose search spans all orientations"
             )
     scan = read_point_cloud(args.scene)

@@ -20,9 +20,7 @@ from ..symmetry import Symmetry
 from ..slam.config import MODES, SlamConfig
 from ..evaluation.slam_run import evaluate_run
 from ..modes import BACKENDS
-from ..slam.initial import InitialState
 from ..slam.results import SlamResult
-from ..slam.session import SlamSession
 from ..slam.survey import Survey
 
 
@@ -110,7 +108,7 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
         raise SlamError(f"The 'dataset' argument of run_slam must be a Dataset. Got {type(dataset).__name__} instead.")
     if len(dataset.attitude) == 0:
         raise SlamError("The dataset has no attitude samples: the filter needs the attitude as input.")
-    from .runner import run_stream  # the runner builds its sessions with make_session below
+    from .runner import run_stream
     from .sources import open_dive
 
     # the streaming runner of `semslam run`, fed from the dataset in memory: one loop for every entry point
@@ -118,25 +116,3 @@ def run_slam(dataset: Dataset, detections_by_scan: dict[int, list[Detection]] | 
                          backend=backend, huber_k=huber_k, survey=survey,
                          detections_by_scan=(detections_by_scan or {}) if mode != "dr" else {})
     return evaluate_run(outcome.results[mode], dataset, symmetries)
-
-
-def make_session(vehicle, start: InitialState, *, mode: str, config: SlamConfig, symmetries=None,
-                 backend: str = "ekf", huber_k: float | None = None):
-    """A :class:`SlamSession` (or, for ``backend`` isam2/batch, a GTSAM :class:`GraphSession`) starting at
-    ``start``."""
-    check_choice("backend", backend, BACKENDS, caller="make_session")
-    kw = dict(mode=mode, config=config, symmetries=symmetries, start=start)
-    if backend == "ekf":
-        return SlamSession(vehicle, **kw)
-    from ..slam.graph import GraphSession  # lazily: GTSAM is imported only for the graph backends
-
-    return GraphSession(vehicle, backend=backend, huber_k=huber_k, **kw)
-
-
-def with_start(result: SlamResult, start: InitialState) -> SlamResult:
-    """``result`` with its start (stamp, position, frame, sources) in its metrics."""
-    from dataclasses import replace
-
-    return replace(result, metrics={**result.metrics, "start": start.as_dict()})
-
-

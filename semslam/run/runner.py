@@ -25,7 +25,7 @@ from ..detection import Detection
 from ..errors import InputError
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
-from .dataset_loop import BACKENDS, make_session, with_start
+from .sessions import BACKENDS, make_session, with_start
 from .messages import ORDER, Scan
 
 #: the shortest delay line (s); it grows to twice the longest scan span seen
