@@ -133,6 +133,10 @@ def _interrupted() -> int:
 
 def _on_sigint(signum, frame) -> None:
     _SIGINT_SEEN[0] = True
+    from .._signals import defer_interrupt
+
+    if defer_interrupt():  # loading native code (semslam._signals): raised when that section ends
+        return
     raise KeyboardInterrupt
 
 

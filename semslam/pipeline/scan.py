@@ -176,6 +176,12 @@ class ScanRecognizer:
         """Prepare every class's pose model now, recognise one database view and estimate the pose of one
         view of every class (it loads the segmentation, descriptor, search and ICP kernels: ~50 ms), so that
         the first scans are not slower than the others (benchmarks/latency.py). No result changes."""
+        from .._signals import critical
+
+        with critical():  # numba loads its cached kernels here: a Ctrl-C waits for the end (semslam._signals)
+            self._warm_up()
+
+    def _warm_up(self) -> None:
         from ..errors import SemslamError
 
         for label in self.db.classes:

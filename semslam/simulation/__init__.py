@@ -2,6 +2,11 @@
 scanner, vehicle motion, navigation sensors) writing datasets (and, through :mod:`semslam.io.ros`, bags). The data
 types are :mod:`semslam.dataset`."""
 
+from .._signals import critical
+
+with critical():  # trimesh imports its optional native readers (cascadio: OpenCASCADE): not to be cut by a Ctrl-C
+    import trimesh  # noqa: F401
+
 from .catalogue import CATALOGUE_LABELS, catalogue_objects
 from .config import (
                      AhrsConfig,

@@ -34,7 +34,7 @@ PKG = Path(__file__).resolve().parents[2] / "semslam"
 LAYERS = {
     "geometry": 0, "geodesy": 0, "cloud": 0, "detection": 0, "errors": 0, "symmetry": 0, "_validation": 0, "_atomic": 0,
     "_jsonable": 0, "modes": 0, "_tables": 0, "_progress": 0, "_outdir": 0, "_workers": 0, "_cache": 0, "_memory": 0,
-    "limits": 0,
+    "_signals": 0, "limits": 0,
     "__init__": 0,
     "io": 1, "dataset": 1,
     "segmentation": 2, "descriptors": 2,
