@@ -74,8 +74,9 @@ class DemoConfig:
         The scan pipeline's named preset (:data:`semslam.run.config.PRESETS`; default: the ``config_file``'s, else
         ``"default"``); its descriptor and classifier are ``descriptor`` and ``classifier``.
     config_file : str, optional
-        A run configuration file (``docs/configuration.md``) on top of ``preset``: its ``pipeline`` section is the
-        scan pipeline's.
+        A run configuration file (``docs/configuration.md``) on top of ``preset``: its ``pipeline`` and ``slam``
+        sections and ``run.up_from_attitude`` are the demo's (its modes are ``modes``). Read and checked before
+        anything is written.
     """
 
     seed: int = 0
@@ -155,6 +156,9 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
     cfg = DemoConfig() if config is None else config
     final = Path(out_dir)
     objects = None
+    from .run.config import load_run_config
+
+    run_cfg = load_run_config(cfg.config_file, preset=cfg.preset)  # read and checked before anything is written
     if cfg.models_dir is not None:  # read (and checked) before anything is written
         from .simulation.cad_models import read_models
 
@@ -179,7 +183,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig | None = None, *, progress:
 
         # 3-4. every scan recognised and SLAM in every mode, in one pass of the streaming runner (`semslam run`'s)
         rec_out, slam_results = stages.run("recognise every scan, SLAM in every mode", _run_dive, mission, db, cfg,
-                                           out, progress, None if objects is None else
+                                           run_cfg, out, progress, None if objects is None else
                                            {k: m.symmetry for k, m in objects.items()})
 
         # 5. consensus figure data, metrics, report
@@ -208,10 +212,9 @@ def _database_stage(stages: "_Stages", cfg: DemoConfig, objects, out: Path, prog
     from .simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 
     if cfg.db_sensor != "kinect":
+        from .simulation import SimulatorConfig
         from .simulation.model_database import sensor_database
         from .simulation.objects import builtin_objects
-
-        from .simulation import SimulatorConfig
 
         db = stages.run(f"render and describe database views ({cfg.db_sensor}, the mission's scanner)",
                         sensor_database, builtin_objects() if objects is None else objects, sensor=cfg.db_sensor,
@@ -260,7 +263,7 @@ def _svm_for_loo(db, descriptor: str, cfg: DemoConfig):
     return SvmClassifier(c_log2=(c, c, 1), gamma_log2=(g, g, 1), seed=cfg.seed)
 
 
-def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetries: dict | None = None):
+def _run_dive(mission, db, cfg: DemoConfig, run_cfg, out: Path, progress: bool, symmetries: dict | None = None):
     """The mission through :func:`semslam.run.run_stream` (the path of ``semslam run``): every scan recognised and
     scored against the simulator's truth as it passes (a separate pass: the estimate never sees it), every mode in
     one pass; detections.jsonl, recognition.json, the Fig. 3 scan and each mode's run directory written."""
@@ -273,9 +276,6 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
     from .run.rundir import write_run
     from .run.rundir import DETECTIONS, mode_dir
 
-    from .run.config import load_run_config
-
-    run_cfg = load_run_config(cfg.config_file, preset=cfg.preset)
     pipe_cfg = dataclasses.replace(run_cfg.pipeline_config(), descriptor=cfg.descriptor, classifier=cfg.classifier)
     recognizer = ScanRecognizer(db, pipe_cfg, seed=cfg.seed)
     recognizer.warm_up()
@@ -292,7 +292,7 @@ def _run_dive(mission, db, cfg: DemoConfig, out: Path, progress: bool, symmetrie
         symmetries = builtin_symmetries() if symmetries is None else symmetries
         found = run_stream(open_dive(mission), modes=tuple(cfg.modes), recognizer=recognizer, symmetries=symmetries,
                            seed=cfg.seed, keep_unreliable=cfg.use_unreliable, on_scan=score, lookahead=LOOKAHEAD,
-                           up_from_attitude=run_cfg.run.up_from_attitude)
+                           up_from_attitude=run_cfg.run.up_from_attitude, config=run_cfg.slam_config())
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})

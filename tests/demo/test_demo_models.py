@@ -64,3 +64,14 @@ def test_simulate_mission_rejects_bad_objects():
 
     with pytest.raises(SimulationError, match="'objects' argument of simulate_dataset must be a non-empty dict"):
         simulate_dataset(objects={}, with_scans=False)
+
+
+def test_a_bad_configuration_file_is_one_line_before_anything_is_written(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[pipeline]\nreject_margn = 2.0\n")
+    out = tmp_path / "o"
+    assert main(["demo", "--quick", "--models", str(MODELS), "--config", str(bad), "--out", str(out),
+                 "--no-progress"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.toml" in err[0] and "reject_margn" in err[0]
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
