@@ -381,6 +381,8 @@ def _dropped_text(cloud: PointCloud, kept: np.ndarray, cfg: SegmentationConfig) 
 
 #: Points farther than this many robust extents outside the 1-99 % box are left out of the plane fit.
 FAR_OUTLIER_EXTENTS = 10.0
+#: Points of the sample the 1-99 % box is measured on.
+_PERCENTILE_SAMPLE = 4096
 
 
 def _near_points(pts: np.ndarray) -> np.ndarray | None:
@@ -388,7 +390,12 @@ def _near_points(pts: np.ndarray) -> np.ndarray | None:
     box, or None when that is all of them: one point at 1e9 m must not change the planes RMSAC finds."""
     if len(pts) < 100:
         return None
-    lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
+    # the percentiles of an evenly strided sample of ~4k points (a 100k-point scan: 8x faster; the box only
+    # scales a margin of 10 extents), and the test per axis on flat columns
+    lo, hi = np.percentile(pts[::max(1, len(pts) // _PERCENTILE_SAMPLE)], [1.0, 99.0], axis=0)
     margin = FAR_OUTLIER_EXTENTS * float((hi - lo).max())
-    inside = ((pts >= lo - margin) & (pts <= hi + margin)).all(axis=1)
+    inside = np.ones(len(pts), dtype=bool)
+    for k in range(pts.shape[1]):
+        col = pts[:, k]
+        inside &= (col >= lo[k] - margin) & (col <= hi[k] + margin)
     return None if inside.all() else np.flatnonzero(inside)
