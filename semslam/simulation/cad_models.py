@@ -55,7 +55,6 @@ import numpy as np
 
 from .._progress import Progress
 from .._tables import read_table
-from .._validation import check_int
 from ..errors import DatabaseError, SemslamError
 from ..symmetry import Symmetry
 from .config import KinectConfig
@@ -64,7 +63,7 @@ from .mesh_files import step_length_unit_m as step_length_unit_m  # re-exported:
 from .model_views import _tied_rests as _tied_rests  # re-exported for tests/pipeline/test_up_from_attitude.py
 from .model_views import models_view_clouds
 from .model_views import resting_up_objects as resting_up_objects  # re-exported: tests import it from here
-from .model_views import with_resting_up
+from .model_views import with_resting_up as with_resting_up  # re-exported: benchmarks and tests import it here
 from .objects import ObjectModel, make_object
 
 __all__ = [
@@ -266,16 +265,8 @@ def build_models_database(models_dir: str | Path, *, seed: int = 0, n_views: int
         Passed to :func:`~semslam.recognition.build_database` (``vfh_variant``, ``normal_radius_m``,
         ``esf_n_samples``, ``voxel_leaf_m``).
     """
-    from ..recognition import build_database
-    from .kinect import POSE_MODEL_KINECT, SURVEY_KINECT
+    from .model_database import sensor_database
 
-    n_model = check_int("n_model_views", n_model_views, caller="build_models_database", minimum=0, maximum=360)
-    models = read_models(models_dir)
-    views, classes = models_view_clouds(models, seed=seed, n_views=n_views, config=kinect or SURVEY_KINECT,
-                                        progress=progress)
-    model_views = None
-    if n_model:
-        model_views, _ = models_view_clouds(models, seed=seed, n_views=n_model,
-                                            config=model_kinect or POSE_MODEL_KINECT, progress=progress, tied_rests=True)
-    return with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, progress=progress,
-                                          **kwargs), models)
+    return sensor_database(read_models(models_dir), sensor="kinect", seed=seed, n_views=n_views,
+                           n_model_views=n_model_views, kinect=kinect, model_kinect=model_kinect, progress=progress,
+                           **kwargs)

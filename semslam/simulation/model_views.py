@@ -86,8 +86,7 @@ def resting_up_objects(models: dict) -> dict[str, list]:
     for label, model in models.items():
         if not model.resting_poses or _tied_rests(model) != [0]:
             continue
-        up = np.asarray(model.resting_poses[0], dtype=float)[:3, :3].T @ np.array([0.0, 0.0, 1.0])
-        out[label] = [float(v) for v in up / np.linalg.norm(up)]
+        out[label] = _rest_up(model, 0)
     return out
 
 
@@ -101,12 +100,15 @@ def tied_up_objects(models: dict) -> dict[str, list]:
         rests = _tied_rests(model)
         if len(rests) < 2:
             continue
-        ups = []
-        for r in rests:
-            up = np.asarray(model.resting_poses[r], dtype=float)[:3, :3].T @ np.array([0.0, 0.0, 1.0])
-            ups.append([float(v) for v in up / np.linalg.norm(up)])
-        out[label] = ups
+        out[label] = [_rest_up(model, r) for r in rests]
     return out
+
+
+def _rest_up(model: ObjectModel, rest: int) -> list[float]:
+    """The up direction (unit, object frame) of ``model`` lying in its resting pose ``rest``:
+    ``R_rest_object^T (0, 0, 1)``."""
+    up = np.asarray(model.resting_poses[rest], dtype=float)[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    return [float(v) for v in up / np.linalg.norm(up)]
 
 
 def with_resting_up(db: Any, models: dict) -> Any:
