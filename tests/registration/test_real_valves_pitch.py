@@ -144,3 +144,25 @@ def test_frames_benchmark_reads_the_original_layout_and_sets_up_per_setting(rv, 
     assert set(ups) == {"pitch045/pitch045yaw-45/40cm", "pitch045/pitch045yaw015/40cm"}
     for u in ups.values():
         np.testing.assert_allclose(u, up, atol=1e-12)
+
+
+def test_pairs_are_judged_against_the_measured_turns_not_the_rig_labels(rv):
+    """The shared README measures the "yaw -30" settings at 14.6 (ball) and 21.7 (globe) degrees from yaw 0: a pair
+    across them is judged against that turn; a setting nobody measured keeps its nominal yaw."""
+    ball = {"cls": "ball_valve", "pitch": 0, "dist": 30}
+    assert rv.setting_turn({**ball, "yaw": -30}) == (-14.6, True)
+    assert rv.setting_turn({**ball, "yaw": 30})[0] - rv.setting_turn({**ball, "yaw": -30})[0] == pytest.approx(47.0)
+    assert rv.setting_turn({"cls": "globe_valve", "pitch": 0, "dist": 30, "yaw": -30}) == (-21.7, True)
+    assert rv.setting_turn({**ball, "yaw": 15, "dist": 40}) == (15.0, False)
+
+
+def test_face_plane_turn_of_a_plate_turned_about_the_vertical(rv):
+    rng = np.random.default_rng(3)
+    plate = np.column_stack([rng.uniform(-0.03, 0.03, 500), rng.uniform(-0.03, 0.03, 500), np.zeros(500)])
+    up = np.array([0.0, -1.0, 0.0])
+    yaws = []
+    for step in (-21.7, 0.0, 32.0):
+        pts = plate @ rv.rot_about_up(up, step).T + [0.0, 0.0, 0.35]
+        yaws.append(rv.face_plane_yaw_deg(pts + rng.normal(0, 1e-4, pts.shape), up))
+    assert yaws[1] - yaws[0] == pytest.approx(21.7, abs=0.3)
+    assert yaws[2] - yaws[1] == pytest.approx(32.0, abs=0.3)
