@@ -382,7 +382,7 @@ def find_attached(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOu
         return outcomes, detections
     tol = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
     piece_kw = {"leaf": float(seg.resolved.get("voxel_leaf_m") or tol / 4.0),
-                "scan_extent": scan_footprint(ctx.scan, cfg),
+                "scan_extent": scan_footprint(ctx.border_scan, cfg),
                 "viewpoint": np.ascontiguousarray(ctx.scan.viewpoint_xyz_m, dtype=np.float64),
                 "max_plausible": rec.max_plausible_extent_m()}
     for n, outcome in enumerate(eligible):

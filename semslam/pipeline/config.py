@@ -116,6 +116,11 @@ class PipelineConfig:
         Objects attached to structure (:mod:`semslam.pipeline.attached`): in the clusters rejected as too big or
         cut by the border, the structure (a pipe, a post) is removed primitive by primitive and the rest is
         recognised. Off (None) by default.
+    deskew : bool
+        Carry every point of a scan with per-point stamps into the scanner frame at the scan's end with the
+        vehicle's own motion over the scan (attitude + DVL, :mod:`semslam.pipeline.deskew`) before segmenting it;
+        its detections are then stamped at the scan's end. On by default; a scan without stamps or navigation
+        over its span is used as it is.
     """
 
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -140,9 +145,12 @@ class PipelineConfig:
     verify_visibility_image: str = "cluster"
     parts: PartsConfig | None = None
     attached: AttachedConfig | None = None
+    deskew: bool = True
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
+        if not isinstance(self.deskew, bool):
+            raise InputError(f"The 'deskew' argument of {c} must be true or false. Got {self.deskew!r} instead.")
         if self.verify_min_fitness is not None:
             check_positive("verify_min_fitness", self.verify_min_fitness, caller=c, allow_zero=True)
             if self.verify_min_fitness > 1:

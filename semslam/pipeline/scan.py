@@ -204,7 +204,8 @@ class ScanRecognizer:
 
     # -- one scan ---------------------------------------------------------------------------------
     def recognize(self, scan: PointCloud, *, seed: int | np.random.Generator = 0, stamp_s: float = float("nan"),
-                  scan_id: int = -1, point_stamps_s: Any = None, up_scanner: Any = None) -> RecognitionResult:
+                  scan_id: int = -1, point_stamps_s: Any = None, up_scanner: Any = None,
+                  measured: PointCloud | None = None) -> RecognitionResult:
         """Segment ``scan``, recognise each cluster and estimate the pose of the recognised ones.
 
         Parameters
@@ -223,10 +224,13 @@ class ScanRecognizer:
         up_scanner : (3,), optional
             The up direction in this scan's frame (a vehicle's attitude at the scan:
             :func:`semslam.pipeline.dataset_detection.up_in_scanner`), instead of ``PipelineConfig.up_scanner``.
+        measured : PointCloud, optional
+            The scan as measured when ``scan`` is its deskewed copy (:mod:`semslam.pipeline.deskew`): the border
+            test reads the directions the scanner measured.
         """
         cfg = self.config
         ctx = scan_context(scan, default_up_scanner=cfg.up_scanner, seed=seed, stamp_s=stamp_s, scan_id=scan_id,
-                           point_stamps_s=point_stamps_s, up_scanner=up_scanner)
+                           point_stamps_s=point_stamps_s, up_scanner=up_scanner, measured=measured)
         t_start = time.perf_counter()
         seg = segment(ctx, cfg)
         timings = {"segmentation": (time.perf_counter() - t_start) * 1e3, "descriptors": 0.0, "matching": 0.0,

@@ -38,6 +38,9 @@ class ScanContext:
     segmentation_seed, cluster_seed : int
         Seed of the segmentation; cluster ``k`` is described and posed with ``cluster_seed + k``, the opt-in stages
         draw theirs from ``cluster_seed`` too.
+    measured : PointCloud or None
+        The scan as measured, when ``scan`` is its deskewed copy (same points, same order): whether a cluster touches
+        the scan's border is a property of the directions the scanner measured, so the border test reads it.
     """
 
     scan: PointCloud
@@ -47,6 +50,12 @@ class ScanContext:
     scan_id: int
     segmentation_seed: int
     cluster_seed: int
+    measured: PointCloud | None = None
+
+    @property
+    def border_scan(self) -> PointCloud:
+        """The cloud of the border test: the scan as measured."""
+        return self.scan if self.measured is None else self.measured
 
     def stamp_of(self, raw_idx: np.ndarray) -> float:
         """Stamp of a detection made of the scan points ``raw_idx``: the median of their stamps, or ``stamp_s``."""
@@ -55,7 +64,7 @@ class ScanContext:
 
 
 def scan_context(scan: Any, *, default_up_scanner: tuple | None, seed: Any, stamp_s: float, scan_id: int,
-                 point_stamps_s: Any, up_scanner: Any) -> ScanContext:
+                 point_stamps_s: Any, up_scanner: Any, measured: Any = None) -> ScanContext:
     """Check the arguments of :meth:`~semslam.pipeline.scan.ScanRecognizer.recognize` and draw the scan's seeds
     (two integers from ``seed``); ``up_scanner`` (scaled to a largest component of 1) overrides
     ``default_up_scanner`` (the configuration's)."""
@@ -74,7 +83,11 @@ def scan_context(scan: Any, *, default_up_scanner: tuple | None, seed: Any, stam
         stamps = as_float_array("point_stamps_s", point_stamps_s, (scan.n_points,), caller=_CALLER)
     rng = as_rng(seed, caller=_CALLER)
     seeds = rng.integers(0, 2**31 - 1, size=2)
-    return ScanContext(scan, up_tuple, stamps, stamp_s, scan_id, int(seeds[0]), int(seeds[1]))
+    if measured is not None and (not isinstance(measured, PointCloud) or measured.n_points != scan.n_points):
+        raise InputError(f"The 'measured' argument of {_CALLER} must be the PointCloud the scan was deskewed from "
+                         f"({scan.n_points} points). Got {type(measured).__name__} "
+                         f"of {getattr(measured, 'n_points', '?')} points instead.")
+    return ScanContext(scan, up_tuple, stamps, stamp_s, scan_id, int(seeds[0]), int(seeds[1]), measured)
 
 
 @dataclass(frozen=True, eq=False)

@@ -86,8 +86,10 @@ def _recognize_cluster(rec: Any, ctx: ScanContext, seg: SegmentationResult, k: i
     cluster_seed = ctx.cluster_seed + k
     # The clusters' points are checked PointCloud arrays: the kernels take them as they are.
     extent = principal_extent(cluster.points_xyz_m)
+    border_pts = cluster.points_xyz_m if ctx.measured is None else \
+        np.ascontiguousarray(ctx.measured.points_xyz_m[_input_indices(seg, k)])
     border = footprint is not None and border_touched(
-        cluster.points_xyz_m, footprint, np.ascontiguousarray(ctx.scan.viewpoint_xyz_m, dtype=np.float64),
+        border_pts, footprint, np.ascontiguousarray(ctx.border_scan.viewpoint_xyz_m, dtype=np.float64),
         float(cfg.border_margin_rad))
     common = {"touches_border": bool(border), "extent_m": tuple(float(e) for e in extent)}
     nan = float("nan")
@@ -123,7 +125,7 @@ def _recognize_cluster(rec: Any, ctx: ScanContext, seg: SegmentationResult, k: i
 def recognize_clusters(rec: Any, ctx: ScanContext, seg: SegmentationResult,
                        timings: dict) -> tuple[list[ClusterOutcome], list[Detection]]:
     """Every cluster of ``seg`` through the stages: their outcomes (in cluster order) and the detections."""
-    footprint = scan_footprint(ctx.scan, rec.config)
+    footprint = scan_footprint(ctx.border_scan, rec.config)
     max_plausible = rec.max_plausible_extent_m()
     outcomes = [_recognize_cluster(rec, ctx, seg, k, footprint, max_plausible, timings)
                 for k in range(len(seg.clusters))]

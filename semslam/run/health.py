@@ -97,6 +97,11 @@ def health_verdict(result, *, counts: dict | None = None, limits: HealthLimits |
     from .damage import add_damage_checks
 
     add_damage_checks(v, counts)  # damaged recordings and stamps out of order, per topic (semslam.run.damage)
+    not_deskewed = int((counts or {}).get("scans_not_deskewed", 0) or 0)
+    if not_deskewed:
+        v.add("scans", "warning", f"{not_deskewed} scans recognised without motion compensation (no attitude or "
+              f"valid DVL velocity within 1 s of their span): their objects are stretched by the vehicle's motion",
+              scans_not_deskewed=not_deskewed)
     skipped = m.get("skipped_beyond_attitude", 0)
     if skipped:
         v.add("stream", "warning", f"{skipped} messages beyond the last attitude sample, skipped")

@@ -23,6 +23,7 @@ from threadpoolctl import threadpool_limits
 from .._memory import release_free_memory
 from ..detection import Detection
 from ..errors import InputError
+from ..pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory, deskew_on
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
 from .sessions import BACKENDS, make_session, with_start
@@ -103,6 +104,7 @@ class Runner:
                              f"Got {lookahead!r} instead.")
         self.on_scan, self.lookahead = on_scan, lookahead
         self._in_flight: list = []  # scans in recognition, in stream order: (first point's stamp, message, future)
+        self._waiting: list = []    # scans to deskew, waiting for the navigation after their end: (message, up)
         self._pool = None
         self.sessions: dict = {}
         self.start: InitialState | None = None
@@ -116,7 +118,7 @@ class Runner:
         self._newest = -math.inf
         self._released = -math.inf
         self._hold = MIN_HOLD_S
-        self._att: list = []        # recent attitude samples (stamp, rpy) for the scans' up
+        self._nav = NavigationHistory(ATTITUDE_MEMORY_S)  # recent attitude and DVL: the scans' up and deskewing
         self._finished = False
         self._blas = None
         if self.given is not None and recognizer is None:  # known in advance: fed at their stamps, scans unused
@@ -137,12 +139,14 @@ class Runner:
             return
         self._newest = max(self._newest, t)
         if msg.kind == "attitude":
-            self._att.append((t, msg.rpy_rad))
-            while self._att and self._att[0][0] < t - ATTITUDE_MEMORY_S:
-                self._att.pop(0)
+            self._nav.add_attitude(t, msg.rpy_rad)
+        elif msg.kind == "dvl":
+            self._nav.add_dvl(t, msg.velocity_mps, msg.valid)
         if msg.kind == "scan":
             self._scan(msg)
             return
+        if self._waiting:
+            self._submit_waiting(final=False)
         self._push(t, msg.kind, msg)
         if self.start is None:
             self._try_start(final=False)
@@ -161,38 +165,75 @@ class Runner:
 
     # ------------------------------------------------------------------ scans
     def _scan(self, msg: Scan) -> None:
-        self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s))
+        span = msg.end_stamp_s - msg.start_stamp_s
         if self.recognizer is None and self.given is not None:
+            self._hold = max(self._hold, 2.0 * span)
             return
         if self.recognizer is None:
+            self._hold = max(self._hold, 2.0 * span)
             self.counts["scans_not_recognised"] += 1
             return
-        else:
-            from ..pipeline.dataset_detection import detect_scan, up_from_attitude_samples
+        from ..pipeline.dataset_detection import up_from_attitude_samples
 
-            up = None
-            if self.up_from_attitude and self._att:
-                ts, rpy = zip(*self._att)
-                up = up_from_attitude_samples(np.array(ts), np.array(rpy), self.vehicle.scanner.T_vehicle_scanner,
-                                              0.5 * (msg.start_stamp_s + msg.end_stamp_s))
-            kw = dict(scan_id=msg.scan_id, start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
-                      point_stamps_s=msg.point_stamps_s, seed=self.seed, keep_unreliable=self.keep_unreliable,
-                      up_scanner=up)
-            if self.lookahead:
-                if self._pool is None:
-                    from concurrent.futures import ThreadPoolExecutor
+        up = None
+        if self.up_from_attitude and self._nav.attitude:
+            ts, rpy = self._nav.attitude_arrays()
+            up = up_from_attitude_samples(ts, rpy, self.vehicle.scanner.T_vehicle_scanner,
+                                          0.5 * (msg.start_stamp_s + msg.end_stamp_s))
+        if self._deskews(msg):  # its recognition waits for the navigation until SMOOTHING_WINDOW_S after its end
+            self._hold = max(self._hold, 2.0 * span + SMOOTHING_WINDOW_S)
+            self._waiting.append((msg, up))
+            self._submit_waiting(final=False)
+            return
+        self._hold = max(self._hold, 2.0 * span)
+        self._submit(msg, up, None)
 
-                    # set before any worker runs: changing OpenBLAS's thread count while another thread is inside
-                    # BLAS can crash (and so can restoring it: close() waits for the workers first)
-                    self._limit_blas()
-                    self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
-                # its detections are stamped by its points: none before the first of them
-                first_s = msg.start_stamp_s if msg.point_stamps_s is None or not len(msg.point_stamps_s) else \
-                    min(msg.start_stamp_s, float(np.min(msg.point_stamps_s)))
-                self._in_flight.append((first_s, msg, self._pool.submit(detect_scan, self.recognizer, msg.cloud, **kw)))
-                self._collect(block_over=self.lookahead)
+    def _deskews(self, msg: Scan) -> bool:
+        st = msg.point_stamps_s
+        return st is not None and len(st) > 0 and deskew_on(self.recognizer)
+
+    def _submit_waiting(self, final: bool, before_s: float = -math.inf) -> None:
+        """Recognise the scans waiting for navigation: those whose end is ``SMOOTHING_WINDOW_S`` behind the newest
+        stamp (every navigation sample up to there has come), those starting before ``before_s`` (the filters are
+        about to pass them), or all of them (``final``)."""
+        while self._waiting:
+            msg, up = self._waiting[0]
+            if not (final or msg.end_stamp_s + SMOOTHING_WINDOW_S <= self._newest or _first_stamp(msg) <= before_s):
                 return
-            self._recognised(msg, *detect_scan(self.recognizer, msg.cloud, **kw))
+            self._waiting.pop(0)
+            self._submit(msg, up, self._scan_motion(msg))
+
+    def _submit(self, msg: Scan, up, motion) -> None:
+        from ..pipeline.dataset_detection import detect_scan
+
+        kw = dict(scan_id=msg.scan_id, start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
+                  point_stamps_s=msg.point_stamps_s, seed=self.seed, keep_unreliable=self.keep_unreliable,
+                  up_scanner=up, motion=motion, T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner)
+        if self.lookahead:
+            if self._pool is None:
+                from concurrent.futures import ThreadPoolExecutor
+
+                # set before any worker runs: changing OpenBLAS's thread count while another thread is inside
+                # BLAS can crash (and so can restoring it: close() waits for the workers first)
+                self._limit_blas()
+                self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
+            # its detections are stamped by its points: none before the first of them
+            self._in_flight.append((_first_stamp(msg), msg,
+                                    self._pool.submit(detect_scan, self.recognizer, msg.cloud, **kw)))
+            self._collect(block_over=self.lookahead)
+            return
+        self._recognised(msg, *detect_scan(self.recognizer, msg.cloud, **kw))
+
+    def _scan_motion(self, msg: Scan):
+        """The vehicle's motion over a scan from the navigation held (None: no navigation over the scan, counted
+        in ``counts["scans_not_deskewed"]``)."""
+        st = msg.point_stamps_s
+        finite = st[np.isfinite(st)]
+        motion = None if not len(finite) else self._nav.motion(
+            self.vehicle.dvl.T_vehicle_dvl.rotation, min(float(finite.min()), msg.end_stamp_s), msg.end_stamp_s)
+        if motion is None:
+            self.counts["scans_not_deskewed"] = self.counts.get("scans_not_deskewed", 0) + 1
+        return motion
 
     def _recognised(self, msg: Scan, dets, stats, result) -> None:
         release_free_memory()  # a scan's arrays freed: the heap's free pages back to the system (semslam._memory)
@@ -283,6 +324,8 @@ class Runner:
         limit = math.inf if final else self._newest - self._hold
         if not self._heap or self._heap[0][0] > limit:
             return
+        if self._waiting:  # (never before its navigation has come, with the hold lengthened by the wait)
+            self._submit_waiting(final=final, before_s=limit)
         if self._in_flight:  # the filters take a scan's detections before passing its start
             self._collect(block_over=self.lookahead, before_s=limit)
         self._limit_blas()
@@ -302,6 +345,7 @@ class Runner:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
         self._in_flight = []
+        self._waiting = []
 
     def close(self) -> None:
         """Stop the recognition threads (waiting for the scans in recognition), then give BLAS its thread count
@@ -320,6 +364,7 @@ class Runner:
             raise InputError("Runner.finish was already called.")
         self._finished = True
         try:
+            self._submit_waiting(final=True)
             self._collect(block_over=0)
         except BaseException:
             self.close()
@@ -377,3 +422,11 @@ def run_stream(dive, **runner_kw) -> RunOutcome:
             r.metrics["geodetic_origin"] = dive.geodetic_origin.as_dict()
     return out
 
+
+def _first_stamp(msg: Scan) -> float:
+    """The stamp of a scan's first point (its start without per-point stamps): no detection of it is older."""
+    st = msg.point_stamps_s
+    if st is None or not len(st):
+        return msg.start_stamp_s
+    finite = st[np.isfinite(st)]
+    return min(msg.start_stamp_s, float(finite.min())) if len(finite) else msg.start_stamp_s

@@ -9,8 +9,10 @@ viewpoints sampled as the simulated missions fly (:class:`LaserViewConfig`: alti
 position along the sweep, roll/pitch, speed), each object alone on a flat floor in its most probable resting
 pose. The points that the segmentation's floor removal would take (within ``floor_cut_m`` of the floor) are
 dropped; the rest are expressed in the object's canonical frame, with the scanner origin at the object's
-middle line as ``viewpoint_xyz_m`` (the cluster a mission sees, in the scanner frame of no single line, carried
-into the object frame by one rigid transform, so the motion distortion stays in the view).
+middle line as ``viewpoint_xyz_m``. Each point is carried into the object frame from its own line's pose: the view
+the scan pipeline sees once it has deskewed the scan with the vehicle's motion (``PipelineConfig.deskew``, on by
+default); ``LaserViewConfig(deskew=False)`` keeps the motion's stretch (the whole view carried by the middle line's
+pose, as a scan that is not deskewed).
 
 The views are the inputs of :func:`~semslam.recognition.build_database` (as
 :func:`~semslam.simulation.cad_models.models_view_clouds` returns them); they can be combined with Kinect views.
@@ -74,6 +76,10 @@ class LaserViewConfig:
         viewpoint until the object is whole in the swath (up to 40 tries, then the last one is kept).
     min_points : int
         Fewer object points than this: another viewpoint is drawn.
+    deskew : bool
+        Each point carried into the object frame from its own line's pose (the view the scan pipeline sees after
+        deskewing, ``PipelineConfig.deskew``, the default); False: the whole view by the middle line's pose, the
+        motion's stretch kept.
     """
 
     scanner: ScannerConfig = field(default_factory=ScannerConfig)
@@ -86,6 +92,7 @@ class LaserViewConfig:
     border_margin_rad: float = math.radians(1.0)
     allow_cut: bool = False
     min_points: int = 50
+    deskew: bool = True
 
     def __post_init__(self) -> None:
         lo, hi = (float(v) for v in self.altitude_m)
@@ -175,10 +182,9 @@ def _scan_view(scene: _Scene, scanner: LaserScanner, cfg: LaserViewConfig, vp: _
     line = cloud.fields["line"]
     sel = inst == 0
     pts, lines = cloud.points_xyz_m[sel], line[sel]
-    if len(pts):  # true world heights (each point in its own line's frame) for the floor cut
-        world = np.einsum("nij,nj->ni", T_lines[lines, :3, :3], pts) + T_lines[lines, :3, 3]
-        keep = (_FLOOR_DEPTH_M - world[:, 2]) >= cfg.floor_cut_m
-        pts, lines = pts[keep], lines[keep]
+    world = np.einsum("nij,nj->ni", T_lines[lines, :3, :3], pts) + T_lines[lines, :3, 3]  # each from its own line
+    keep = (_FLOOR_DEPTH_M - world[:, 2]) >= cfg.floor_cut_m  # true world heights for the floor cut
+    pts, lines, world = pts[keep], lines[keep], world[keep]
     if len(pts) == 0:
         return PointCloud(np.zeros((0, 3)), viewpoint_xyz_m=np.zeros(3), frame_id="object"), False, np.zeros(3)
     a = np.arctan2(pts[:, 0], pts[:, 2])
@@ -186,8 +192,12 @@ def _scan_view(scene: _Scene, scanner: LaserScanner, cfg: LaserViewConfig, vp: _
     cut = bool(np.max(np.abs(a)) > sc.sweep_fov_rad / 2 - cfg.border_margin_rad
                or np.max(np.abs(phi)) > sc.line_fov_rad / 2 - cfg.border_margin_rad)
     ref = int(np.round(np.median(lines)))
-    T_object_scanner = np.linalg.inv(scene.T_world_object) @ T_lines[ref]
-    pts_obj = pts @ T_object_scanner[:3, :3].T + T_object_scanner[:3, 3]
+    T_object_world = np.linalg.inv(scene.T_world_object)
+    T_object_scanner = T_object_world @ T_lines[ref]
+    if cfg.deskew:
+        pts_obj = world @ T_object_world[:3, :3].T + T_object_world[:3, 3]
+    else:
+        pts_obj = pts @ T_object_scanner[:3, :3].T + T_object_scanner[:3, 3]
     eye = T_object_scanner[:3, 3].copy()
     return PointCloud(pts_obj, viewpoint_xyz_m=eye, frame_id="object"), cut, eye
 

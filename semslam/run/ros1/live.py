@@ -41,7 +41,9 @@ import numpy as np
 
 from ..._memory import release_free_memory
 from ...errors import SemslamError, SlamError
+from ...pipeline.deskew import deskew_on
 from ..messages import Attitude, Depth, Dvl, Scan
+from .live_deskew import DeskewQueue
 from .live_health import LogTally, live_health
 from .live_prediction import Prediction, carry_forward, session_attitude
 from .timing import FifoSlot, LatestSlot, ReorderBuffer
@@ -59,6 +61,7 @@ class ScanJob:
     received_wall_s: float
     up_scanner: Any = None
     abandoned: bool = False
+    motion: Any = None
     meta: dict = field(default_factory=dict)
 
     @property
@@ -150,6 +153,7 @@ class LiveSlam:
         self._recent_attitude: list[tuple[float, np.ndarray]] = []  # arrived, newer than the filter's time
         self._recent_dvl: list[tuple[float, np.ndarray]] = []  # valid DVL samples, newer than the filter's time
         self._held: list = []        # navigation waiting behind a scan in recognition: (message, wall)
+        self._deskew = DeskewQueue(vehicle.dvl.T_vehicle_dvl.rotation)  # scans waiting for the navigation
         self._pending: list[ScanJob] = []  # scans waiting for or in recognition, in stamp order
         self._n_scans = 0
         #: when the message last given to the runner was received (``time.monotonic()``): latency statistics
@@ -198,6 +202,9 @@ class LiveSlam:
                 self._recent_attitude.append((msg.stamp_s, np.asarray(msg.rpy_rad, dtype=float)))
             elif kind == "dvl" and msg.valid and np.isfinite(msg.velocity_mps).all():
                 self._recent_dvl.append((msg.stamp_s, msg.velocity_mps))
+            if kind in ("attitude", "dvl"):
+                self._deskew.add_navigation(msg)
+                self._deskew_ready(final=False)
             elif kind == "scan" and msg.stamp_s >= self.buffer.released_s:
                 # recognition starts as the scan arrives (it needs no other message): only its entry into the
                 # filter waits for the reorder window (a scan the window will drop as late is not recognised)
@@ -269,6 +276,28 @@ class LiveSlam:
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
         job = ScanJob(msg, wall, up)
         bisect.insort(self._pending, job, key=lambda j: j.start_s)  # arrival order need not be stamp order
+        st = msg.point_stamps_s
+        if st is not None and len(st) and deskew_on(self.recognizer):
+            self._deskew.waiting.append(job)  # recognised once the navigation after its end has come
+            self._deskew_ready(final=False)
+            return
+        self._to_slot(job)
+
+    def _deskew_ready(self, final: bool) -> None:
+        """The scans whose navigation has come to the recognition worker (:class:`DeskewQueue`)."""
+        for job in self._deskew.ready(final):
+            self._to_slot(job)
+        self.stats["scans_not_deskewed"] = self._deskew.not_deskewed
+
+    def poll(self) -> None:
+        """Give the recognition worker the scans that waited ``NAVIGATION_WAIT_S`` (wall clock) for the navigation
+        after their end (the navigation stopped, or the dive ended): deskewed with what came."""
+        with self.lock:
+            if self._deskew.waiting and not self._closed:
+                self._deskew_ready(final=False)
+                self._advance()
+
+    def _to_slot(self, job: ScanJob) -> None:
         old = self.slot.put(job)
         if old is not None:
             old.abandoned = True
@@ -323,7 +352,9 @@ class LiveSlam:
                 kept, stats, result = detect_scan(self.recognizer, sc.cloud, scan_id=sc.scan_id,
                                                   start_stamp_s=sc.start_stamp_s, end_stamp_s=sc.end_stamp_s,
                                                   point_stamps_s=sc.point_stamps_s, seed=self.seed,
-                                                  keep_unreliable=self.keep_unreliable, up_scanner=job.up_scanner)
+                                                  keep_unreliable=self.keep_unreliable, up_scanner=job.up_scanner,
+                                                  motion=job.motion,
+                                                  T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner)
             except SemslamError as err:  # a scan the pipeline refuses: counted, navigation goes on
                 kept, stats, result, err_text = [], None, None, f"scan {sc.scan_id}: {err}"
             except Exception as err:  # noqa: BLE001 - a bug must not stop the navigation: counted and reported
@@ -396,6 +427,7 @@ class LiveSlam:
             self._closed = True
             for _, _, (m, w) in self.buffer.flush():
                 self._released(m, w)
+            self._deskew_ready(final=True)
             self._advance()
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:

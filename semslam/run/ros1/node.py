@@ -223,6 +223,7 @@ def _spin(rospy, node: NodeTopics, diagnostics_period_s: float) -> None:
     try:
         while not rospy.is_shutdown():
             time.sleep(0.05)
+            node.live.poll()  # scans that waited too long for the navigation after their end
             if time.monotonic() >= next_diag:
                 next_diag += diagnostics_period_s
                 node.check_topic_types()
