@@ -166,17 +166,14 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
 
 def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float):
     """The vehicle's motion over a scan from the dataset's attitude and DVL logs (None without stamps)."""
-    if point_stamps_s is None or not len(point_stamps_s):
-        return None
-    from .deskew import scan_motion
+    from .deskew import scan_motion, scan_span
 
-    finite = np.asarray(point_stamps_s, dtype=float)
-    finite = finite[np.isfinite(finite)]
-    if not len(finite):
+    span = scan_span(point_stamps_s, end_stamp_s)
+    if span is None:
         return None
     a, d = dataset.attitude, dataset.dvl
     return scan_motion(a.stamp_s, a.rpy_rad, d.stamp_s, d.velocity_body_mps, d.valid,
-                       dataset.vehicle.dvl.T_vehicle_dvl.rotation, min(float(finite.min()), end_stamp_s), end_stamp_s)
+                       dataset.vehicle.dvl.T_vehicle_dvl.rotation, *span)
 
 
 def _at_own_stamps(result: RecognitionResult, motion, T_vehicle_scanner, ref_stamp_s: float) -> RecognitionResult:

@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from ..cloud import PointCloud
-from ..geometry import RigidTransform, rpy_from_rotation
+from ..geometry import RigidTransform, rotation_from_rpy, rpy_from_rotation
 
 __all__ = ["MAX_NAV_GAP_S", "NavigationHistory", "ScanMotion", "deskew_points", "deskew_scan", "deskew_on",
-           "reexpressed", "scan_motion", "sensor_motion_between"]
+           "reexpressed", "scan_motion", "scan_span", "sensor_motion_between"]
 
 #: largest gap (s) between a scan's span and the nearest attitude / valid DVL sample for the scan to be deskewed
 MAX_NAV_GAP_S = 1.0
@@ -65,16 +65,18 @@ class ScanMotion:
     p_world_vehicle_m: np.ndarray
 
 
-def _rotations_fromrpy_from_rotation(rpy: np.ndarray) -> np.ndarray:
-    """(n, 3) roll, pitch, yaw -> (n, 3, 3) ``Rz(yaw) Ry(pitch) Rx(roll)`` (as ``geometry.rotation_from_rpy``)."""
-    cr, sr = np.cos(rpy[:, 0]), np.sin(rpy[:, 0])
-    cp, sp = np.cos(rpy[:, 1]), np.sin(rpy[:, 1])
-    cy, sy = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
-    return np.stack([
-        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
-        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
-        np.stack([-sp, cp * sr, cp * cr], axis=-1),
-    ], axis=1)
+def _rotations_from_rpy(rpy: np.ndarray) -> np.ndarray:
+    """(n, 3) roll, pitch, yaw -> (n, 3, 3) rotations (:func:`semslam.geometry.rotation_from_rpy`, vectorised)."""
+    return np.moveaxis(rotation_from_rpy(rpy[:, 0], rpy[:, 1], rpy[:, 2]), -1, 0)
+
+
+def scan_span(point_stamps_s: Any, end_stamp_s: float) -> tuple[float, float] | None:
+    """``(first stamp, end stamp)`` of a scan with per-point stamps (None without a finite one)."""
+    if point_stamps_s is None:
+        return None
+    st = np.asarray(point_stamps_s, dtype=float)
+    finite = st[np.isfinite(st)]
+    return (min(float(finite.min()), float(end_stamp_s)), float(end_stamp_s)) if len(finite) else None
 
 
 def scan_motion(attitude_stamps_s: Any, rpy_rad: Any, dvl_stamps_s: Any, velocity_dvl_mps: Any, dvl_valid: Any,
@@ -114,7 +116,7 @@ def scan_motion(attitude_stamps_s: Any, rpy_rad: Any, dvl_stamps_s: Any, velocit
     n = max(2, int(math.ceil((t1 - t0) / _STEP_S)) + 1)
     grid = np.linspace(t0, t1, n)
     tm = 0.5 * (t0 + t1)
-    R = _rotations_fromrpy_from_rotation(_smooth(ta - tm, rpy, grid - tm))
+    R = _rotations_from_rpy(_smooth(ta - tm, rpy, grid - tm))
     od = np.argsort(td, kind="stable")
     v_body = v[od] @ np.asarray(R_vehicle_dvl, dtype=float).T
     v_world = np.einsum("nij,nj->ni", R, _smooth(td[od] - tm, v_body, grid - tm))
@@ -169,7 +171,7 @@ def reexpressed(T_new_old: np.ndarray, T_old_object: np.ndarray,
 
 
 def _rot(rpy: np.ndarray) -> np.ndarray:
-    return _rotations_fromrpy_from_rotation(np.asarray(rpy, dtype=float).reshape(1, 3))[0]
+    return _rotations_from_rpy(np.asarray(rpy, dtype=float).reshape(1, 3))[0]
 
 
 def deskew_points(points_xyz_m: Any, point_stamps_s: Any, motion: ScanMotion, T_vehicle_sensor: Any,
@@ -228,6 +230,11 @@ class NavigationHistory:
             return np.zeros(0), np.zeros((0, 3))
         ts, rpy = zip(*self.attitude)
         return np.array(ts), np.array(rpy, dtype=float).reshape(-1, 3)
+
+    def scan_motion(self, R_vehicle_dvl: Any, point_stamps_s: Any, end_stamp_s: float) -> ScanMotion | None:
+        """The motion over a scan (:func:`scan_span`) from the samples held; None without stamps or navigation."""
+        span = scan_span(point_stamps_s, end_stamp_s)
+        return None if span is None else self.motion(R_vehicle_dvl, *span)
 
     def motion(self, R_vehicle_dvl: Any, t0_s: float, t1_s: float) -> ScanMotion | None:
         """:func:`scan_motion` over ``[t0_s, t1_s]`` from the samples held."""

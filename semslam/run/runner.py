@@ -227,10 +227,7 @@ class Runner:
     def _scan_motion(self, msg: Scan):
         """The vehicle's motion over a scan from the navigation held (None: no navigation over the scan, counted
         in ``counts["scans_not_deskewed"]``)."""
-        st = msg.point_stamps_s
-        finite = st[np.isfinite(st)]
-        motion = None if not len(finite) else self._nav.motion(
-            self.vehicle.dvl.T_vehicle_dvl.rotation, min(float(finite.min()), msg.end_stamp_s), msg.end_stamp_s)
+        motion = self._nav.scan_motion(self.vehicle.dvl.T_vehicle_dvl.rotation, msg.point_stamps_s, msg.end_stamp_s)
         if motion is None:
             self.counts["scans_not_deskewed"] = self.counts.get("scans_not_deskewed", 0) + 1
         return motion

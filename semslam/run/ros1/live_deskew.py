@@ -7,8 +7,6 @@ import math
 import time
 from typing import Any
 
-import numpy as np
-
 from ...pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory
 
 #: wall-clock seconds a scan waits for the navigation after its end (``SMOOTHING_WINDOW_S`` of stamps) before it is
@@ -42,9 +40,6 @@ class DeskewQueue:
                or now - j.received_wall_s > NAVIGATION_WAIT_S]
         for job in out:
             self.waiting.remove(job)
-            st = job.scan.point_stamps_s
-            finite = st[np.isfinite(st)]
-            job.motion = None if not len(finite) else self.nav.motion(
-                self.R_vehicle_dvl, min(float(finite.min()), job.end_s), job.end_s)
+            job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s)
             self.not_deskewed += job.motion is None
         return [j for j in out if not j.abandoned]
