@@ -94,9 +94,9 @@ def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_
     as without deskewing), so that the motion's error enters only over its own points' time span (measured: 0.9 mm
     median position error with the true motion, 4.8 mm with the navigation's when posed at the scan's end).
     ``stats["deskewed"]`` says whether it was."""
-    from .deskew import deskew_on, deskew_scan
+    from .deskew import deskew_scan, deskews
 
-    deskewed = motion is not None and point_stamps_s is not None and len(point_stamps_s) > 0 and deskew_on(recognizer)
+    deskewed = motion is not None and deskews(recognizer, point_stamps_s)
     measured = cloud if deskewed else None
     if deskewed:
         cloud = deskew_scan(cloud, point_stamps_s, motion, T_vehicle_scanner, end_stamp_s)

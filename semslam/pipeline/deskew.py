@@ -30,7 +30,7 @@ import numpy as np
 from ..cloud import PointCloud
 from ..geometry import RigidTransform, rotation_from_rpy, rpy_from_rotation
 
-__all__ = ["MAX_NAV_GAP_S", "NavigationHistory", "ScanMotion", "deskew_points", "deskew_scan", "deskew_on",
+__all__ = ["MAX_NAV_GAP_S", "NavigationHistory", "ScanMotion", "deskew_points", "deskew_scan", "deskews",
            "reexpressed", "scan_motion", "scan_span", "sensor_motion_between"]
 
 #: largest gap (s) between a scan's span and the nearest attitude / valid DVL sample for the scan to be deskewed
@@ -202,9 +202,11 @@ def deskew_scan(cloud: PointCloud, point_stamps_s: Any, motion: ScanMotion, T_ve
                       fields=cloud.fields)
 
 
-def deskew_on(recognizer: Any) -> bool:
-    """Does ``recognizer`` (a :class:`~semslam.pipeline.ScanRecognizer`, or any object with a ``config``) deskew?"""
-    return bool(getattr(getattr(recognizer, "config", None), "deskew", False))
+def deskews(recognizer: Any, point_stamps_s: Any) -> bool:
+    """Is a scan with these per-point stamps deskewed by ``recognizer`` (a :class:`~semslam.pipeline.ScanRecognizer`,
+    or any object with a ``config``)? It needs stamps and ``PipelineConfig.deskew``."""
+    return point_stamps_s is not None and len(point_stamps_s) > 0 and \
+        bool(getattr(getattr(recognizer, "config", None), "deskew", False))
 
 
 class NavigationHistory:

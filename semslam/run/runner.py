@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_limits
 from .._memory import release_free_memory
 from ..detection import Detection
 from ..errors import InputError
-from ..pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory, deskew_on
+from ..pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory, deskews
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
 from .sessions import BACKENDS, make_session, with_start
@@ -165,13 +165,10 @@ class Runner:
 
     # ------------------------------------------------------------------ scans
     def _scan(self, msg: Scan) -> None:
-        span = msg.end_stamp_s - msg.start_stamp_s
-        if self.recognizer is None and self.given is not None:
-            self._hold = max(self._hold, 2.0 * span)
-            return
+        self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s))
         if self.recognizer is None:
-            self._hold = max(self._hold, 2.0 * span)
-            self.counts["scans_not_recognised"] += 1
+            if self.given is None:
+                self.counts["scans_not_recognised"] += 1
             return
         from ..pipeline.dataset_detection import up_from_attitude_samples
 
@@ -180,17 +177,12 @@ class Runner:
             ts, rpy = self._nav.attitude_arrays()
             up = up_from_attitude_samples(ts, rpy, self.vehicle.scanner.T_vehicle_scanner,
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
-        if self._deskews(msg):  # its recognition waits for the navigation until SMOOTHING_WINDOW_S after its end
-            self._hold = max(self._hold, 2.0 * span + SMOOTHING_WINDOW_S)
+        if deskews(self.recognizer, msg.point_stamps_s):  # recognised once the navigation after its end has come
+            self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s) + SMOOTHING_WINDOW_S)
             self._waiting.append((msg, up))
             self._submit_waiting(final=False)
             return
-        self._hold = max(self._hold, 2.0 * span)
         self._submit(msg, up, None)
-
-    def _deskews(self, msg: Scan) -> bool:
-        st = msg.point_stamps_s
-        return st is not None and len(st) > 0 and deskew_on(self.recognizer)
 
     def _submit_waiting(self, final: bool, before_s: float = -math.inf) -> None:
         """Recognise the scans waiting for navigation: those whose end is ``SMOOTHING_WINDOW_S`` behind the newest

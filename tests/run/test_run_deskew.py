@@ -125,3 +125,28 @@ def test_a_measured_scan_of_another_size_is_refused(recognizer):
     scan = PointCloud(np.random.default_rng(0).uniform(-1, 1, (200, 3)) + [0, 0, 2])
     with pytest.raises(InputError, match="measured"):
         recognizer.recognize(scan, measured=PointCloud(scan.points_xyz_m[:100]))
+
+
+def test_the_live_node_waits_for_a_scans_navigation_while_it_keeps_coming(monkeypatch):
+    """A loaded machine delivers navigation slowly: a scan waits for its own (0.5 s of stamps past its end) however
+    long that takes in wall clock, and is given up to with what came only once no navigation has come for
+    NAVIGATION_WAIT_S (the recording ended)."""
+    from types import SimpleNamespace
+
+    from semslam.run.ros1 import live_deskew
+    from semslam.run.ros1.live_deskew import NAVIGATION_WAIT_S, DeskewQueue
+
+    clock = {"t": 100.0}
+    monkeypatch.setattr(live_deskew.time, "monotonic", lambda: clock["t"])
+    q = DeskewQueue(np.eye(3))
+    stamps = np.linspace(9.67, 10.0, 50)
+    job = SimpleNamespace(end_s=10.0, received_wall_s=100.0, abandoned=False, motion=None,
+                          scan=SimpleNamespace(point_stamps_s=stamps))
+    q.waiting.append(job)
+    for k, t in enumerate(np.arange(8.0, 10.4, 0.05)):  # navigation up to 0.4 s past the end, 0.5 s of wall apart
+        clock["t"] = 100.0 + 0.5 * k
+        q.add_navigation(SimpleNamespace(kind="attitude", stamp_s=float(t), rpy_rad=np.zeros(3)))
+        q.add_navigation(SimpleNamespace(kind="dvl", stamp_s=float(t), velocity_mps=np.array([0.3, 0, 0]), valid=True))
+        assert q.ready(final=False) == []  # waited far longer than NAVIGATION_WAIT_S, but navigation keeps coming
+    clock["t"] += NAVIGATION_WAIT_S + 0.1  # the navigation stopped
+    assert q.ready(final=False) == [job] and job.motion is not None and q.not_deskewed == 0

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..._memory import release_free_memory
 from ...errors import SemslamError, SlamError
-from ...pipeline.deskew import deskew_on
+from ...pipeline.deskew import deskews
 from ..messages import Attitude, Depth, Dvl, Scan
 from .live_deskew import DeskewQueue
 from .live_health import LogTally, live_health
@@ -202,10 +202,10 @@ class LiveSlam:
                 self._recent_attitude.append((msg.stamp_s, np.asarray(msg.rpy_rad, dtype=float)))
             elif kind == "dvl" and msg.valid and np.isfinite(msg.velocity_mps).all():
                 self._recent_dvl.append((msg.stamp_s, msg.velocity_mps))
-            if kind in ("attitude", "dvl"):
+            if kind in ("attitude", "dvl"):  # every sample, valid or not, for the scans' deskewing
                 self._deskew.add_navigation(msg)
                 self._deskew_ready(final=False)
-            elif kind == "scan" and msg.stamp_s >= self.buffer.released_s:
+            if kind == "scan" and msg.stamp_s >= self.buffer.released_s:
                 # recognition starts as the scan arrives (it needs no other message): only its entry into the
                 # filter waits for the reorder window (a scan the window will drop as late is not recognised)
                 self._scan(msg, wall)
@@ -276,8 +276,7 @@ class LiveSlam:
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
         job = ScanJob(msg, wall, up)
         bisect.insort(self._pending, job, key=lambda j: j.start_s)  # arrival order need not be stamp order
-        st = msg.point_stamps_s
-        if st is not None and len(st) and deskew_on(self.recognizer):
+        if deskews(self.recognizer, msg.point_stamps_s):
             self._deskew.waiting.append(job)  # recognised once the navigation after its end has come
             self._deskew_ready(final=False)
             return
@@ -290,8 +289,8 @@ class LiveSlam:
         self.stats["scans_not_deskewed"] = self._deskew.not_deskewed
 
     def poll(self) -> None:
-        """Give the recognition worker the scans that waited ``NAVIGATION_WAIT_S`` (wall clock) for the navigation
-        after their end (the navigation stopped, or the dive ended): deskewed with what came."""
+        """Give the recognition worker the scans still waiting for their navigation when none has come for
+        ``NAVIGATION_WAIT_S`` of wall clock (the navigation stopped, or the dive ended): deskewed with what came."""
         with self.lock:
             if self._deskew.waiting and not self._closed:
                 self._deskew_ready(final=False)

@@ -9,8 +9,9 @@ from typing import Any
 
 from ...pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory
 
-#: wall-clock seconds a scan waits for the navigation after its end (``SMOOTHING_WINDOW_S`` of stamps) before it is
-#: deskewed with what came (:meth:`LiveSlam.poll`): the navigation stopped, or a recording ended
+#: wall-clock seconds without any navigation message after which the scans still waiting for theirs are deskewed with
+#: what came (:meth:`LiveSlam.poll`): the navigation stopped, or a recording ended. While navigation keeps coming,
+#: however slowly (a loaded machine), a scan waits for its own, so a replay gives the offline detections
 NAVIGATION_WAIT_S = 1.0
 
 
@@ -23,6 +24,7 @@ class DeskewQueue:
         self.newest_s = -math.inf
         self.waiting: list = []
         self.not_deskewed = 0
+        self.last_wall_s = -math.inf  # when the last navigation message came (time.monotonic())
 
     def add_navigation(self, msg: Any) -> None:
         if msg.kind == "attitude":
@@ -30,14 +32,16 @@ class DeskewQueue:
         else:
             self.nav.add_dvl(msg.stamp_s, msg.velocity_mps, msg.valid)
         self.newest_s = max(self.newest_s, msg.stamp_s)
+        self.last_wall_s = time.monotonic()
 
     def ready(self, final: bool) -> list:
-        """The jobs whose navigation has come (up to ``SMOOTHING_WINDOW_S`` after their end), that waited
-        ``NAVIGATION_WAIT_S`` of wall clock, or all (``final``), with their motion (None: counted in
-        ``not_deskewed``), abandoned ones dropped."""
+        """The jobs whose navigation has come (up to ``SMOOTHING_WINDOW_S`` after their end), all of them when no
+        navigation came for ``NAVIGATION_WAIT_S`` of wall clock, or all (``final``), with their motion (None: counted
+        in ``not_deskewed``), abandoned ones dropped."""
         now = time.monotonic()
+        stopped = now - self.last_wall_s > NAVIGATION_WAIT_S
         out = [j for j in self.waiting if final or j.end_s + SMOOTHING_WINDOW_S <= self.newest_s
-               or now - j.received_wall_s > NAVIGATION_WAIT_S]
+               or (stopped and now - j.received_wall_s > NAVIGATION_WAIT_S)]
         for job in out:
             self.waiting.remove(job)
             job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s)
