@@ -104,7 +104,8 @@ class Runner:
                              f"Got {lookahead!r} instead.")
         self.on_scan, self.lookahead = on_scan, lookahead
         self._in_flight: list = []  # scans in recognition, in stream order: (first point's stamp, message, future)
-        self._waiting: list = []    # scans to deskew, waiting for the navigation after their end: (message, up)
+        self._waiting: list = []    # scans to deskew, waiting for the navigation after their end:
+        #                             (message, up, its first point's stamp)
         self._pool = None
         self.sessions: dict = {}
         self.start: InitialState | None = None
@@ -179,7 +180,7 @@ class Runner:
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
         if deskews(self.recognizer, msg.point_stamps_s):  # recognised once the navigation after its end has come
             self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s) + SMOOTHING_WINDOW_S)
-            self._waiting.append((msg, up))
+            self._waiting.append((msg, up, _first_stamp(msg)))
             self._submit_waiting(final=False)
             return
         self._submit(msg, up, None)
@@ -189,13 +190,13 @@ class Runner:
         stamp (every navigation sample up to there has come), those starting before ``before_s`` (the filters are
         about to pass them), or all of them (``final``)."""
         while self._waiting:
-            msg, up = self._waiting[0]
-            if not (final or msg.end_stamp_s + SMOOTHING_WINDOW_S <= self._newest or _first_stamp(msg) <= before_s):
+            msg, up, first_s = self._waiting[0]
+            if not (final or msg.end_stamp_s + SMOOTHING_WINDOW_S <= self._newest or first_s <= before_s):
                 return
             self._waiting.pop(0)
-            self._submit(msg, up, self._scan_motion(msg))
+            self._submit(msg, up, self._scan_motion(msg), first_s)
 
-    def _submit(self, msg: Scan, up, motion) -> None:
+    def _submit(self, msg: Scan, up, motion, first_s: float | None = None) -> None:
         from ..pipeline.dataset_detection import detect_scan
 
         kw = dict(scan_id=msg.scan_id, start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
@@ -210,7 +211,7 @@ class Runner:
                 self._limit_blas()
                 self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
             # its detections are stamped by its points: none before the first of them
-            self._in_flight.append((_first_stamp(msg), msg,
+            self._in_flight.append((_first_stamp(msg) if first_s is None else first_s, msg,
                                     self._pool.submit(detect_scan, self.recognizer, msg.cloud, **kw)))
             self._collect(block_over=self.lookahead)
             return
