@@ -24,7 +24,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..cloud import POINT_TIME_FIELDS
+from ..cloud import POINT_TIME_FIELDS, PointCloud
 from ..dataset import Dataset, VehicleDescription
 from ..errors import BagError, InputError
 from ..geodesy import GeodeticOrigin
@@ -289,9 +289,8 @@ def _mounting_at_open(bag, tmap, vehicle):
 def _scan_message(payload, t: float, scan_id: int) -> Scan:
     """A decoded PointCloud2 as a :class:`Scan`: per-point stamps from its time field (else every point at the
     header stamp), the scan stamped at its last point."""
-    cloud = payload.to_point_cloud()
-    fields = {k: v for k, v in cloud.fields.items() if k not in POINT_TIME_FIELDS}
-    cloud = replace(cloud, fields=fields, frame_id="scanner")
+    fields = {k: v for k, v in payload.fields.items() if k not in POINT_TIME_FIELDS}  # the stamps go to the Scan
+    cloud = PointCloud(payload.points_xyz_m, intensity=payload.intensity, frame_id="scanner", fields=fields)
     n = len(payload.points_xyz_m)
     offs = payload.time_offset_s if payload.time_offset_s is not None else np.zeros(n)
     stamps = t + np.asarray(offs, dtype=float)

@@ -91,6 +91,24 @@ def test_non_finite_points_dropped_with_mask() -> None:
     assert decode_pointcloud2(msg).n_dropped == 3
 
 
+@pytest.mark.parametrize("time_encoding", ["uint32_ns", "float32_s"])
+@pytest.mark.parametrize("coords_dtype", ["float32", "float64"])
+def test_native_kernel_decodes_like_swapped_byte_order(time_encoding: str, coords_dtype: str) -> None:
+    """Native-endian fields go through the one-pass kernel, swapped ones through numpy: the same cloud either way,
+    non-finite points, rows and row padding included."""
+    pts, inten, t = _cloud(60, seed=11)
+    pts[[0, 7, 33, 59]] = [[np.nan, 0, 0], [0, np.inf, 0], [0, 0, -np.inf], [np.nan] * 3]
+    kw = dict(intensity=inten, time_offset_s=t, time_encoding=time_encoding, height=5, row_padding_bytes=4,
+              coords_dtype=coords_dtype)
+    native = decode_pointcloud2(encode_pointcloud2(pts, big_endian=False, **kw))
+    swapped = decode_pointcloud2(encode_pointcloud2(pts, big_endian=True, **kw))
+    assert native.n_dropped == swapped.n_dropped == 4
+    for name in ("points_xyz_m", "intensity", "time_offset_s", "valid_mask"):
+        got, want = getattr(native, name), getattr(swapped, name)
+        assert got.dtype == want.dtype, name
+        np.testing.assert_array_equal(got, want, err_msg=name)
+
+
 def _manual(fields: list[tuple[str, int, str, int]], values: dict[str, np.ndarray], n: int, *, point_step: int,
             big: bool = False, height: int = 1) -> NS:
     """A duck-typed PointCloud2 with fields (name, offset, numpy code, count)."""

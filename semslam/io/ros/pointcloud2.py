@@ -27,6 +27,7 @@ import numpy as np
 
 from ...cloud import POINT_TIME_FIELDS, PointCloud
 from ...errors import BagError
+from ._pointcloud2_kernels import finite_xyz, gather_kept
 
 __all__ = ["DATATYPES", "PointCloud2Data", "decode_pointcloud2", "encode_pointcloud2"]
 
@@ -162,10 +163,12 @@ def _layout(msg: Any, source: str, n_bytes: int) -> tuple[dict[str, tuple[int, s
     return named, height, width, point_step, row_step
 
 
-def _time_offsets_s(values: np.ndarray, stamp_ns: int) -> np.ndarray:
-    if values.dtype.kind in "iu":
-        return values.astype(np.float64) * 1e-9
-    v = values.astype(np.float64)
+def _time_offsets_s(values: np.ndarray, stamp_ns: int, integer: bool | None = None) -> np.ndarray:
+    """Seconds from the header stamp of a time field's ``values`` (``integer``: the field's type was an integer one,
+    when ``values`` are already float64)."""
+    if values.dtype.kind in "iu" if integer is None else integer:
+        return np.asarray(values, dtype=np.float64) * 1e-9
+    v = np.asarray(values, dtype=np.float64)
     sample = v[::max(1, len(v) // 4096)]  # the unit is read from the magnitude: ~4k evenly spaced points suffice
     finite = np.abs(sample[np.isfinite(sample)])
     if not finite.size:  # the sample missed the few finite stamps: all of them
@@ -216,6 +219,18 @@ def decode_pointcloud2(msg: Any, *, source: str = "PointCloud2 message") -> Poin
         return _extract(grid, named, height, width, frame_id, stamp_ns)
 
 
+def _gathered(values: np.ndarray, keep: np.ndarray, n_keep: int) -> np.ndarray:
+    out = np.empty(n_keep)
+    gather_kept(values, keep, out)
+    return out
+
+
+def _native(code: str, kinds: str) -> bool:
+    """A field type code (``"<f4"``, ``">u4"``...) the kernels read: native byte order, one of ``kinds``."""
+    dt = np.dtype(code)
+    return dt.kind in kinds and dt.isnative and dt.itemsize >= (4 if dt.kind == "f" else 1)
+
+
 def _first(values: np.ndarray) -> np.ndarray:
     """(H, W, count) -> (H, W): the first element of a ``count`` > 1 field."""
     return values[..., 0] if values.ndim == 3 else values
@@ -225,22 +240,31 @@ def _extract(grid: np.ndarray | None, named: dict[str, tuple[int, str, int]], he
              frame_id: str, stamp_ns: int) -> PointCloud2Data:
     if grid is None:  # an empty cloud: empty arrays for the fields it declares
         grid = np.zeros((height, width), dtype=[(n, c, (k,)) if k > 1 else (n, c) for n, (_, c, k) in named.items()])
-    # per axis on flat arrays, then one (M, 3) array filled column by column: 4x faster than testing and indexing
-    # an (H, W, 3) stack for 100k points (benchmarks/RESULTS.md, "Recorded dives"); the same values
-    cols = ([_first(grid[a]).reshape(-1).astype(np.float64) for a in _XYZ] if all(a in named for a in _XYZ)
-            else [np.zeros(height * width)] * 3)
-    keep = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
-    valid = keep.reshape(height, width)
-    n_keep = int(np.count_nonzero(keep))
-    xyz = np.empty((n_keep, 3))
-    for k, c in enumerate(cols):
-        xyz[:, k] = c if n_keep == keep.size else c[keep]
     time_field = next((n for n in POINT_TIME_FIELDS if n in named), None)
+    fast = all(a in named for a in _XYZ) and len({named[a][1] for a in _XYZ}) == 1 and _native(named["x"][1], "f")
+    if fast:  # one pass of a kernel over the message's own strided fields (_pointcloud2_kernels)
+        keep, xyz = np.empty(height * width, dtype=bool), np.empty((height * width, 3))
+        n_keep = finite_xyz(*(_first(grid[a]) for a in _XYZ), keep, xyz)
+        xyz = xyz if n_keep == len(xyz) else xyz[:n_keep].copy()
+    else:  # per axis on flat arrays, then one (M, 3) array filled column by column
+        cols = ([_first(grid[a]).reshape(-1).astype(np.float64) for a in _XYZ] if all(a in named for a in _XYZ)
+                else [np.zeros(height * width)] * 3)
+        keep = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
+        n_keep = int(np.count_nonzero(keep))
+        xyz = np.empty((n_keep, 3))
+        for k, c in enumerate(cols):
+            xyz[:, k] = c if n_keep == keep.size else c[keep]
+    valid = keep.reshape(height, width)
     time_s = intensity = None
     if time_field is not None:
-        time_s = _time_offsets_s(_first(grid[time_field]).reshape(-1)[keep], stamp_ns)
+        code = named[time_field][1]
+        values = _first(grid[time_field])
+        time_s = (_time_offsets_s(_gathered(values, keep, n_keep), stamp_ns, code[1] in "iu")
+                  if fast and _native(code, "iuf") else _time_offsets_s(values.reshape(-1)[keep], stamp_ns))
     if "intensity" in named:
-        intensity = _first(grid["intensity"]).astype(np.float64).reshape(-1)[keep]
+        values = _first(grid["intensity"])
+        intensity = (_gathered(values, keep, n_keep) if fast and _native(named["intensity"][1], "iuf")
+                     else values.astype(np.float64).reshape(-1)[keep])
     extra: dict[str, np.ndarray] = {}
     for n in named:
         if n not in (*_XYZ, "intensity", time_field):
