@@ -59,14 +59,15 @@ def _transform_at(t: float, grid: np.ndarray, R: np.ndarray, p: np.ndarray, R_vs
 
 @njit(cache=True, nogil=True)
 def deskew_kernel(points: np.ndarray, stamps: np.ndarray, grid: np.ndarray, R: np.ndarray, p: np.ndarray,
-                  R_vs: np.ndarray, t_vs: np.ndarray, R_ref: np.ndarray,
-                  p_ref: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+                  R_vs: np.ndarray, t_vs: np.ndarray, R_ref: np.ndarray, p_ref: np.ndarray,
+                  out: np.ndarray) -> None:  # pragma: no cover - compiled
     """Each point (scanner frame at its own stamp) into the scanner frame at the reference pose: the motion's
     rotation and position interpolated linearly between its samples (10 ms apart: rotation steps of a fraction of a
     degree), clamped at its ends; non-finite stamps leave their points as they are. The transform is computed once
-    per run of stamps within ``STAMP_SHARE_S`` of its first (a line scanner's points share their line's stamp)."""
+    per run of stamps within ``STAMP_SHARE_S`` of its first (a line scanner's points share their line's stamp).
+    Written to ``out`` (N, 3), which the caller allocates (an array numba returns has a base: PointCloud copies it)
+    and fills with ``points`` (the points with a non-finite stamp stay as they are)."""
     n = points.shape[0]
-    out = points.copy()
     M, B, A = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
     c, d = np.empty(3), np.empty(3)
     j = 0
@@ -81,4 +82,3 @@ def deskew_kernel(points: np.ndarray, stamps: np.ndarray, grid: np.ndarray, R: n
         x0, x1, x2 = points[i, 0], points[i, 1], points[i, 2]
         for a in range(3):
             out[i, a] = M[a, 0] * x0 + M[a, 1] * x1 + M[a, 2] * x2 + c[a]
-    return out

@@ -212,7 +212,7 @@ class Runner:
                 self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
             # its detections are stamped by its points: none before the first of them
             self._in_flight.append((_first_stamp(msg) if first_s is None else first_s, msg,
-                                    self._pool.submit(detect_scan, self.recognizer, msg.cloud, **kw)))
+                                    self._pool.submit(_detect_and_trim, self.recognizer, msg.cloud, **kw)))
             self._collect(block_over=self.lookahead)
             return
         self._recognised(msg, *detect_scan(self.recognizer, msg.cloud, **kw))
@@ -226,7 +226,8 @@ class Runner:
         return motion
 
     def _recognised(self, msg: Scan, dets, stats, result) -> None:
-        release_free_memory()  # a scan's arrays freed: the heap's free pages back to the system (semslam._memory)
+        if not self.lookahead:  # a scan's arrays freed: the heap's free pages back to the system (semslam._memory);
+            release_free_memory()  # in a worker thread itself when recognition runs there (_detect_and_trim)
         self.scans.append(stats)
         if self.on_scan is not None:
             self.on_scan(msg, dets, stats, result)
@@ -410,6 +411,16 @@ def run_stream(dive, **runner_kw) -> RunOutcome:
     if dive.geodetic_origin is not None:
         for r in out.results.values():
             r.metrics["geodetic_origin"] = dive.geodetic_origin.as_dict()
+    return out
+
+
+def _detect_and_trim(recognizer, cloud, **kw):
+    """:func:`detect_scan` in a worker thread, then the heap's free pages back to the system (off the thread that
+    reads the dive and runs the filters)."""
+    from ..pipeline.dataset_detection import detect_scan
+
+    out = detect_scan(recognizer, cloud, **kw)
+    release_free_memory()
     return out
 
 
