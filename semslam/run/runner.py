@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._memory import release_free_memory
+from .._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ..detection import Detection
 from ..errors import InputError
 from ..pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory, deskews
@@ -226,8 +226,10 @@ class Runner:
         return motion
 
     def _recognised(self, msg: Scan, dets, stats, result) -> None:
-        if not self.lookahead:  # a scan's arrays freed: the heap's free pages back to the system (semslam._memory);
-            release_free_memory()  # in a worker thread itself when recognition runs there (_detect_and_trim)
+        # a scan's arrays freed: the heap's free pages back to the system (semslam._memory); in the worker thread
+        # itself when recognition runs there (_detect_and_trim)
+        if not self.lookahead:
+            release_free_memory(TRIM_ABOVE_BYTES)
         self.scans.append(stats)
         if self.on_scan is not None:
             self.on_scan(msg, dets, stats, result)
@@ -420,7 +422,7 @@ def _detect_and_trim(recognizer, cloud, **kw):
     from ..pipeline.dataset_detection import detect_scan
 
     out = detect_scan(recognizer, cloud, **kw)
-    release_free_memory()
+    release_free_memory(TRIM_ABOVE_BYTES)
     return out
 
 

@@ -8,7 +8,7 @@ import platform
 import numpy as np
 import pytest
 
-from semslam._memory import release_free_memory
+from semslam._memory import heap_free_bytes, release_free_memory
 
 
 def _rss_anon_kb() -> int:
@@ -34,4 +34,24 @@ def test_free_heap_pages_go_back_to_the_system_after_a_trim():
     assert release_free_memory() is True
     after = _rss_anon_kb()
     assert before - after > 40_000, f"resident anonymous memory {before} kB -> {after} kB"
+    assert pin[0] == 1
+
+
+@pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
+def test_trim_waits_until_enough_of_the_heap_is_free():
+    """With a threshold the heap is trimmed only when more than it is free (mallinfo2's free bytes), so a run does
+    not give back, every scan, pages the next scan faults in again."""
+    big = np.empty(40 << 20, dtype=np.uint8)
+    big[::4096] = 1
+    del big
+    blocks = [np.ones(200_000, dtype=np.uint8) for _ in range(200)]  # ~40 MB on the heap
+    pin = blocks.pop()
+    blocks.clear()
+    free = heap_free_bytes()
+    assert free is not None and free > 30 << 20
+    before = _rss_anon_kb()
+    assert release_free_memory(above_bytes=free + (64 << 20)) is False  # not enough free: nothing done
+    assert _rss_anon_kb() > before - 10_000
+    assert release_free_memory(above_bytes=free // 2) is True
+    assert before - _rss_anon_kb() > 20_000
     assert pin[0] == 1

@@ -39,7 +39,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..._memory import release_free_memory
+from ..._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ...errors import SemslamError, SlamError
 from ...pipeline.deskew import deskews
 from ..messages import Attitude, Depth, Dvl, Scan
@@ -360,7 +360,7 @@ class LiveSlam:
                 kept, stats, result = [], None, None
                 err_text = f"scan {sc.scan_id}: {type(err).__name__}: {err}"
             latency = time.monotonic() - job.received_wall_s
-            release_free_memory()  # the scan's arrays freed: the heap's free pages back (semslam._memory)
+            release_free_memory(TRIM_ABOVE_BYTES)  # the scan's arrays freed: free heap pages back (semslam._memory)
             with self.lock:
                 if self._finished:  # close() gave this scan up after its timeout
                     return
