@@ -226,6 +226,8 @@ def _snapshot(ekf) -> tuple[np.ndarray, np.ndarray]:
     if ekf.compressed:
         return ekf.full_state()
     A = ekf.active_indices
+    if len(A) == ekf.n and (not len(A) or (A[0] == 0 and bool(np.all(A[1:] > A[:-1])))):  # every state, in order
+        return np.array(ekf.xa, dtype=float), np.array(ekf.Paa, dtype=float)
     x = np.empty(ekf.n)
     x[A] = ekf.xa
     P = np.empty((ekf.n, ekf.n))
