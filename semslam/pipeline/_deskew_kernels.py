@@ -65,8 +65,8 @@ def deskew_kernel(points: np.ndarray, stamps: np.ndarray, grid: np.ndarray, R: n
     rotation and position interpolated linearly between its samples (10 ms apart: rotation steps of a fraction of a
     degree), clamped at its ends; non-finite stamps leave their points as they are. The transform is computed once
     per run of stamps within ``STAMP_SHARE_S`` of its first (a line scanner's points share their line's stamp).
-    Written to ``out`` (N, 3), which the caller allocates (an array numba returns has a base: PointCloud copies it)
-    and fills with ``points`` (the points with a non-finite stamp stay as they are)."""
+    Written to ``out`` (N, 3), which the caller allocates (an array numba returns has a base: PointCloud copies it).
+    """
     n = points.shape[0]
     M, B, A = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
     c, d = np.empty(3), np.empty(3)
@@ -74,7 +74,8 @@ def deskew_kernel(points: np.ndarray, stamps: np.ndarray, grid: np.ndarray, R: n
     last = np.nan
     for i in range(n):
         t = stamps[i]
-        if not np.isfinite(t):
+        if not np.isfinite(t):  # left as it is
+            out[i, 0], out[i, 1], out[i, 2] = points[i, 0], points[i, 1], points[i, 2]
             continue
         if not abs(t - last) <= STAMP_SHARE_S:
             j = _transform_at(t, grid, R, p, R_vs, t_vs, R_ref, p_ref, j, M, c, B, A, d)

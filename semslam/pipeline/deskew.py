@@ -189,7 +189,7 @@ def deskew_points(points_xyz_m: Any, point_stamps_s: Any, motion: ScanMotion, T_
     R_ref = (1 - w) * motion.R_world_vehicle[k] + w * motion.R_world_vehicle[k + 1]
     U, _, Vt = np.linalg.svd(R_ref)
     p_ref = (1 - w) * motion.p_world_vehicle_m[k] + w * motion.p_world_vehicle_m[k + 1]
-    out = pts.copy()
+    out = np.empty_like(pts)
     deskew_kernel(pts, st, np.ascontiguousarray(motion.stamps_s), np.ascontiguousarray(motion.R_world_vehicle),
                   np.ascontiguousarray(motion.p_world_vehicle_m), np.ascontiguousarray(T[:3, :3]),
                   np.ascontiguousarray(T[:3, 3]), np.ascontiguousarray(U @ Vt), p_ref, out)
