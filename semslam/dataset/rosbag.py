@@ -73,10 +73,10 @@ class BagDecoder:
             check_limit("bag.quaternion_norm", norm, f"The attitude topic {self.map.attitude!r}: an orientation "
                         "quaternion's norm", error=BagError)
         from ..geometry import rpy_from_rotation
-        from ..io.ros import imu_to_ned_frd
+        from ..io.ros import imu_rpy_ned_frd
 
         if self.map.attitude_frame == "enu":
-            return imu_to_ned_frd(msg)[0]
+            return imu_rpy_ned_frd(msg)
         o = msg.orientation
         from ..geometry import rotation_from_quat_wxyz
 

@@ -26,6 +26,7 @@ from ...geometry import check_rotation, quat_wxyz_from_rotation, rotation_from_q
 __all__ = [
     "C_FRD_FLU",
     "C_NED_ENU",
+    "imu_rpy_ned_frd",
     "imu_to_ned_frd",
     "quat_xyzw_from_R_world_ned_vehicle_frd",
     "R_world_enu_vehicle_flu_from_R_world_ned_vehicle_frd",
@@ -148,10 +149,15 @@ def imu_to_ned_frd(msg: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     def vec(v: Any) -> np.ndarray:
         return np.array([v.x, v.y, v.z], dtype=np.float64)
 
-    cov = np.asarray(getattr(msg, "orientation_covariance", np.zeros(9)), dtype=np.float64).reshape(-1)
+    return (imu_rpy_ned_frd(msg), rates_frd_from_flu(vec(msg.angular_velocity)),
+            vectors_frd_from_flu(vec(msg.linear_acceleration)))
+
+
+def imu_rpy_ned_frd(msg: Any) -> np.ndarray:
+    """The attitude alone of :func:`imu_to_ned_frd` (what a recorded dive reads of its Imu messages, 20-100 a
+    second: the rates and accelerations are not converted)."""
+    cov = np.asarray(getattr(msg, "orientation_covariance", ()), dtype=np.float64).reshape(-1)
     if cov.size and cov[0] == -1.0:
-        rpy = np.full(3, np.nan)
-    else:
-        o = msg.orientation
-        rpy = rpy_ned_frd_from_quat_xyzw([o.x, o.y, o.z, o.w])
-    return rpy, rates_frd_from_flu(vec(msg.angular_velocity)), vectors_frd_from_flu(vec(msg.linear_acceleration))
+        return np.full(3, np.nan)
+    o = msg.orientation
+    return rpy_ned_frd_from_quat_xyzw([o.x, o.y, o.z, o.w])
