@@ -13,7 +13,8 @@ Per format and per start (fix / no fix), over the runs:
 * ATE of every mode, unaligned (world frame: the fix error is in it) and after the 4-DoF alignment (yaw +
   translation); the launch error; the ratio DR / pose;
 * one landmark per object (4) in how many runs; the max |depth error| of the pose run;
-* the vehicle position NEES (mean over epochs, then over runs) and the landmarks' pose NEES;
+* the vehicle position NEES (mean over epochs, then over runs) and the share of epochs inside the per-epoch 95 %
+  chi-square band (3 dof); the landmarks' position NEES (3 dof) and the share of them inside that band;
 * the health verdicts.
 
     nice -n 5 .venv/bin/python benchmarks/real_path.py --runs 30 --seed 100 [--formats ros1,ros2-mcap] [--jobs 1]
@@ -87,7 +88,8 @@ def evaluate(run_dir: Path, m, time_shift_s: float) -> dict:
         out[mode] = {"ate": float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))), "ate_4dof": ate_4dof(est, truth),
                      "ate_4dof_smoothed": a_sm,
                      "launch": float(np.linalg.norm(e[0])), "depth_max": float(np.max(np.abs(e[:, 2]))),
-                     "nees": float(np.mean(nees(e, cov))), "n_landmarks": met["n_landmarks"],
+                     "nees": float(np.mean(nees(e, cov))), "nees_in_band": _in_band(nees(e, cov)),
+                     "n_landmarks": met["n_landmarks"],
                      "landmark_nees": lm, "verdict": met["health"]["verdict"], "frame": frame}
     return out
 
@@ -99,6 +101,15 @@ def _covs(path: Path) -> np.ndarray:
         rows = list(csv.DictReader(fh))
     keys = [["cov_p_xx", "cov_p_xy", "cov_p_xz"], ["cov_p_xy", "cov_p_yy", "cov_p_yz"], ["cov_p_xz", "cov_p_yz", "cov_p_zz"]]
     return np.array([[[float(r[k]) for k in row] for row in keys] for r in rows])
+
+
+def _in_band(values, dof: int = 3) -> float:
+    """Share of NEES values inside their two-sided 95 % chi-square band (``dof`` degrees of freedom)."""
+    from scipy.stats import chi2
+
+    v = np.asarray(values, dtype=float)
+    lo, hi = chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)
+    return float(np.mean((v >= lo) & (v <= hi))) if v.size else float("nan")
 
 
 def _landmark_nees(path: Path, m, shift_ne) -> list:
@@ -172,8 +183,8 @@ def main() -> None:
 
 def table(rows: list) -> str:
     lines = ["| format | start | runs | pose ATE 4-DoF (m) | smoothed (DR/smoothed) | DR ATE 4-DoF (m) | DR/pose | unaligned pose ATE "
-             "(m) | launch error (m) | 1 landmark per object | max depth error (m) | vehicle NEES | landmark NEES "
-             "(3 dof) | verdicts |", "|" + "---|" * 14]
+             "(m) | launch error (m) | 1 landmark per object | max depth error (m) | vehicle NEES | vehicle NEES epochs "
+             "in 95 % band | landmark NEES (3 dof) | landmarks in 95 % band | verdicts |", "|" + "---|" * 16]
     for fmt in sorted({r["format"] for r in rows}):
         for start in ("fix", "no fix"):
             rs = [r for r in rows if r["format"] == fmt and r["start"] == start]
@@ -191,7 +202,8 @@ def table(rows: list) -> str:
                          f"{np.mean([p['ate'] for p in pose]):.3f} | {np.mean([p['launch'] for p in pose]):.2f} | "
                          f"{sum(p['n_landmarks'] == 4 for p in pose)}/{len(rs)} | "
                          f"{max(p['depth_max'] for p in pose):.3f} | {np.mean([p['nees'] for p in pose]):.2f} | "
-                         f"{np.mean(lm) if lm else float('nan'):.2f} | {verdicts} |")
+                         f"{100 * np.mean([p['nees_in_band'] for p in pose]):.0f} % | "
+                         f"{np.mean(lm) if lm else float('nan'):.2f} | {100 * _in_band(lm):.0f} % | {verdicts} |")
     return "\n".join(lines)
 
 
