@@ -25,6 +25,7 @@ __all__ = ["TRIM_ABOVE_BYTES", "heap_free_bytes", "release_free_memory"]
 #: a run trims the heap after a scan when more than this is free in it
 TRIM_ABOVE_BYTES = 128 << 20
 
+
 class _Mallinfo2(ctypes.Structure):
     _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
                                                       "fsmblks", "uordblks", "fordblks", "keepcost")]

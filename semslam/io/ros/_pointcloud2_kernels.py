@@ -1,8 +1,8 @@
 """Kernels of :mod:`semslam.io.ros.pointcloud2`: a PointCloud2's x, y, z read straight from the message's strided
 fields in one pass, its non-finite points dropped, and the kept points' other fields gathered as float64.
 
-One pass instead of numpy's three casts, three finiteness tests and three masked copies (3-4 ms -> ~0.5 ms for a
-100k-point scan), and without the GIL, so the recognition threads run while a bag is read. Native-endian float32
+One pass instead of numpy's three casts, three finiteness tests and three masked copies (the whole decode of a
+100k-point scan 3.0-4.4 ms -> 1.5-1.9 ms), and without the GIL, so the recognition threads run while a bag is read. Native-endian float32
 and float64 coordinates only; the caller keeps numpy's path for any other layout."""
 
 from __future__ import annotations
