@@ -2,8 +2,8 @@
 fields in one pass, its non-finite points dropped, and the kept points' other fields gathered as float64.
 
 One pass instead of numpy's three casts, three finiteness tests and three masked copies (the whole decode of a
-100k-point scan 3.0-4.4 ms -> 1.5-1.9 ms), and without the GIL, so the recognition threads run while a bag is read. Native-endian float32
-and float64 coordinates only; the caller keeps numpy's path for any other layout."""
+100k-point scan 3.0-4.4 ms -> 1.5-1.9 ms), and without the GIL, so the recognition threads run while a bag is
+read. Native-endian float32 and float64 coordinates only; the caller keeps numpy's path for any other layout."""
 
 from __future__ import annotations
 
