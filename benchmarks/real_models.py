@@ -29,7 +29,8 @@ Usage::
 the shared models' database is rendered by the mission's laser by default, the fittings' by the Kinect. Recall is
 per cluster; a class of the mission that never made a cluster (the blind flange lying against the tank's slope,
 one cluster with it, before the ``seabed`` preset's second plane) is named below the table, as it cannot be
-counted in it. The last column is the mean 6-DoF NEES of the reliable poses only (those the filter uses).
+counted in it. ``rel6`` is the mean 6-DoF NEES of the reliable poses only (those the filter uses); ``rel`` and
+``relprec`` the reliable detections and their precision (a pose cut by the scan border is never reliable).
 
 Each run writes ``OUT/seed_<s>/`` (a demo run directory) and ``OUT/summary.json``.
 """
@@ -146,9 +147,13 @@ def per_class_table(rows: list[dict]) -> dict:
         n3 = [r["pose_nees"] for r in correct if r.get("pose_nees_dof") == 3]
         # the poses the filter uses (unreliable ones, e.g. cut by the scan border, are skipped by default)
         n6r = [r["pose_nees"] for r in correct if r.get("pose_nees_dof") == 6 and r.get("reliable")]
+        reliable = [r for r in dets if r.get("reliable")]  # what SLAM takes (unreliable ones are skipped by default)
         out[lab] = {
             "detections": len(dets), "objects": len(objs),
             "precision": len(correct) / len(dets) if dets else float("nan"),
+            "reliable": len(reliable),
+            "precision_reliable": (sum(r["label"] == r["truth_label"] for r in reliable) / len(reliable)
+                                   if reliable else float("nan")),
             "recall": len(found) / len(objs) if objs else float("nan"),
             "median_rot_deg": float(np.median(rot)) if rot else float("nan"),
             "median_trans_mm": float(np.median(tr)) if tr else float("nan"),
@@ -164,13 +169,15 @@ def per_class_table(rows: list[dict]) -> dict:
 def print_table(table: dict, title: str) -> None:
     print(f"\n{title}")
     print(f"{'class':20s} {'dets':>5s} {'objs':>5s} {'prec':>6s} {'recall':>6s} {'rot°':>6s} {'mm':>6s} {'>10°':>4s} "
-          f"{'NEES6':>8s} {'(n)':>4s} {'med6':>6s} {'NEES3':>7s} {'(n)':>4s} {'rel6':>7s} {'(n)':>4s}")
+          f"{'NEES6':>8s} {'(n)':>4s} {'med6':>6s} {'NEES3':>7s} {'(n)':>4s} {'rel6':>7s} {'(n)':>4s} {'rel':>4s} "
+          f"{'relprec':>7s}")
     for lab, s in table.items():
         print(f"{lab:20s} {s['detections']:5d} {s['objects']:5d} {100 * s['precision']:5.1f}% "
               f"{100 * s['recall']:5.1f}% "
               f"{s['median_rot_deg']:6.2f} {s['median_trans_mm']:6.2f} {s['wrong_poses']:4d} {s['mean_nees6']:8.2f} "
               f"{s['n_nees6']:4d} {s['median_nees6']:6.2f} {s['mean_nees3']:7.2f} {s['n_nees3']:4d} "
-              f"{s['mean_nees6_reliable']:7.2f} {s['n_nees6_reliable']:4d}")
+              f"{s['mean_nees6_reliable']:7.2f} {s['n_nees6_reliable']:4d} {s['reliable']:4d} "
+              f"{100 * s['precision_reliable']:6.1f}%")
 
 
 def main(argv: list[str] | None = None) -> int:
