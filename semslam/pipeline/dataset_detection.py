@@ -143,6 +143,8 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
     if not isinstance(recognizer, ScanRecognizer):
         raise InputError(f"The 'recognizer' argument of detect_dataset must be a ScanRecognizer. Got "
                          f"{type(recognizer).__name__} instead.")
+    from .deskew import deskew_lookahead_s
+
     out = DatasetDetections()
     scans = dataset.scans
     with progress_steps(progress, len(scans), "recognise", "scan") as step:
@@ -153,7 +155,8 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
             kept, stats, result = detect_scan(recognizer, cloud, scan_id=rec.scan_id, start_stamp_s=rec.start_stamp_s,
                                               end_stamp_s=rec.end_stamp_s, point_stamps_s=stamps, seed=seed,
                                               keep_unreliable=keep_unreliable, up_scanner=up,
-                                              motion=_scan_motion(dataset, stamps, rec.end_stamp_s),
+                                              motion=_scan_motion(dataset, stamps, rec.end_stamp_s,
+                                                                  deskew_lookahead_s(recognizer)),
                                               T_vehicle_scanner=dataset.vehicle.scanner.T_vehicle_scanner)
             if kept:
                 out.detections_by_scan[rec.scan_id] = kept
@@ -164,8 +167,9 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
     return out
 
 
-def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float):
-    """The vehicle's motion over a scan from the dataset's attitude and DVL logs (None without stamps)."""
+def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float, lookahead_s: float):
+    """The vehicle's motion over a scan from the dataset's attitude and DVL logs (None without stamps), with no
+    sample later than ``lookahead_s`` after its end (what a stream's runner waits for)."""
     from .deskew import scan_motion, scan_span
 
     span = scan_span(point_stamps_s, end_stamp_s)
@@ -173,7 +177,7 @@ def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float):
         return None
     a, d = dataset.attitude, dataset.dvl
     return scan_motion(a.stamp_s, a.rpy_rad, d.stamp_s, d.velocity_body_mps, d.valid,
-                       dataset.vehicle.dvl.T_vehicle_dvl.rotation, *span)
+                       dataset.vehicle.dvl.T_vehicle_dvl.rotation, *span, lookahead_s=lookahead_s)
 
 
 def _at_own_stamps(result: RecognitionResult, motion, T_vehicle_scanner, ref_stamp_s: float) -> RecognitionResult:

@@ -80,10 +80,12 @@ def scan_span(point_stamps_s: Any, end_stamp_s: float) -> tuple[float, float] | 
 
 
 def scan_motion(attitude_stamps_s: Any, rpy_rad: Any, dvl_stamps_s: Any, velocity_dvl_mps: Any, dvl_valid: Any,
-                R_vehicle_dvl: Any, t0_s: float, t1_s: float, *, max_gap_s: float = MAX_NAV_GAP_S) -> ScanMotion | None:
+                R_vehicle_dvl: Any, t0_s: float, t1_s: float, *, max_gap_s: float = MAX_NAV_GAP_S,
+                lookahead_s: float = SMOOTHING_WINDOW_S) -> ScanMotion | None:
     """The vehicle's motion over ``[t0_s, t1_s]`` from attitude samples (stamps (n,), roll-pitch-yaw (n, 3)) and DVL
     samples (stamps (m,), velocities in the DVL frame (m, 3), validity (m,)): None when either has no sample within
-    ``max_gap_s`` of both ends (valid DVL samples only)."""
+    ``max_gap_s`` of both ends (valid DVL samples only). No sample later than ``t1_s + lookahead_s`` is used
+    (``PipelineConfig.deskew_lookahead_s``: what a stream waits for after a scan's end)."""
     t0, t1 = float(t0_s), float(t1_s)
     if not (math.isfinite(t0) and math.isfinite(t1)) or t1 < t0:
         return None
@@ -97,11 +99,14 @@ def scan_motion(attitude_stamps_s: Any, rpy_rad: Any, dvl_stamps_s: Any, velocit
 
     def window(t: np.ndarray, ok: np.ndarray) -> np.ndarray:
         """The samples within the smoothing window of the span, on both sides (within the largest gap when it holds
-        fewer than 4). A stream's runner and the live node wait for the navigation up to ``SMOOTHING_WINDOW_S``
-        after a scan's end before they recognise it, so that they and a dataset's logs deskew a scan alike (a
-        window ending at the scan's end was measured 3x worse: 11.5 mm median, 27 mm p90)."""
-        sel = ok & (t >= t0 - SMOOTHING_WINDOW_S) & (t <= t1 + SMOOTHING_WINDOW_S)
-        return sel if sel.sum() >= 4 else ok & (t >= t0 - max_gap_s) & (t <= t1 + max_gap_s)
+        fewer than 4), never beyond ``lookahead_s`` after the end. A stream's runner and the live node wait for the
+        navigation up to ``lookahead_s`` after a scan's end before they recognise it, so that they and a dataset's
+        logs deskew a scan alike (a window ending at the scan's end was measured 3x worse: 11.5 mm median, 27 mm
+        p90)."""
+        sel = ok & (t >= t0 - SMOOTHING_WINDOW_S) & (t <= t1 + min(SMOOTHING_WINDOW_S, lookahead_s))
+        if sel.sum() >= 4:
+            return sel
+        return ok & (t >= t0 - max_gap_s) & (t <= t1 + min(max_gap_s, lookahead_s))
 
     keep, near = window(td, ok_d), window(ta, ok_a)
     td, v, ta, rpy = td[keep], v[keep], ta[near], rpy[near]
@@ -204,6 +209,12 @@ def deskew_scan(cloud: PointCloud, point_stamps_s: Any, motion: ScanMotion, T_ve
                       fields=cloud.fields)
 
 
+def deskew_lookahead_s(recognizer: Any) -> float:
+    """The navigation a stream waits for after a scan's end before ``recognizer`` deskews it
+    (``PipelineConfig.deskew_lookahead_s``; the smoothing window's half for an object without that setting)."""
+    return float(getattr(getattr(recognizer, "config", None), "deskew_lookahead_s", SMOOTHING_WINDOW_S))
+
+
 def deskews(recognizer: Any, point_stamps_s: Any) -> bool:
     """Is a scan with these per-point stamps deskewed by ``recognizer`` (a :class:`~semslam.pipeline.ScanRecognizer`,
     or any object with a ``config``)? It needs stamps and ``PipelineConfig.deskew``."""
@@ -235,16 +246,18 @@ class NavigationHistory:
         ts, rpy = zip(*self.attitude)
         return np.array(ts), np.array(rpy, dtype=float).reshape(-1, 3)
 
-    def scan_motion(self, R_vehicle_dvl: Any, point_stamps_s: Any, end_stamp_s: float) -> ScanMotion | None:
+    def scan_motion(self, R_vehicle_dvl: Any, point_stamps_s: Any, end_stamp_s: float, *,
+                    lookahead_s: float = SMOOTHING_WINDOW_S) -> ScanMotion | None:
         """The motion over a scan (:func:`scan_span`) from the samples held; None without stamps or navigation."""
         span = scan_span(point_stamps_s, end_stamp_s)
-        return None if span is None else self.motion(R_vehicle_dvl, *span)
+        return None if span is None else self.motion(R_vehicle_dvl, *span, lookahead_s=lookahead_s)
 
-    def motion(self, R_vehicle_dvl: Any, t0_s: float, t1_s: float) -> ScanMotion | None:
+    def motion(self, R_vehicle_dvl: Any, t0_s: float, t1_s: float, *,
+               lookahead_s: float = SMOOTHING_WINDOW_S) -> ScanMotion | None:
         """:func:`scan_motion` over ``[t0_s, t1_s]`` from the samples held."""
         if not self.attitude or not self.dvl:
             return None
         ta, rpy = self.attitude_arrays()
         td, v, ok = zip(*self.dvl)
         return scan_motion(ta, rpy, np.array(td), np.array(v, dtype=float).reshape(-1, 3), np.array(ok),
-                           R_vehicle_dvl, t0_s, t1_s)
+                           R_vehicle_dvl, t0_s, t1_s, lookahead_s=lookahead_s)

@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_limits
 from .._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ..detection import Detection
 from ..errors import InputError
-from ..pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory, deskews
+from ..pipeline.deskew import NavigationHistory, deskew_lookahead_s, deskews
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
 from .sessions import BACKENDS, make_session, with_start
@@ -95,6 +95,7 @@ class Runner:
         if backend not in BACKENDS:
             raise InputError(f"The 'backend' of a run must be one of {BACKENDS}. Got {backend!r} instead.")
         self.vehicle, self.modes, self.recognizer = vehicle, modes, recognizer
+        self._lookahead_s = deskew_lookahead_s(recognizer)  # navigation a scan waits for after its end
         self.given = None if detections_by_scan is None else dict(detections_by_scan)
         self.cfg = SlamConfig() if config is None else config
         self.symmetries, self.backend, self.huber_k, self.survey = symmetries, backend, huber_k, survey
@@ -179,19 +180,19 @@ class Runner:
             up = up_from_attitude_samples(ts, rpy, self.vehicle.scanner.T_vehicle_scanner,
                                           0.5 * (msg.start_stamp_s + msg.end_stamp_s))
         if deskews(self.recognizer, msg.point_stamps_s):  # recognised once the navigation after its end has come
-            self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s) + SMOOTHING_WINDOW_S)
+            self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s) + self._lookahead_s)
             self._waiting.append((msg, up, _first_stamp(msg)))
             self._submit_waiting(final=False)
             return
         self._submit(msg, up, None)
 
     def _submit_waiting(self, final: bool, before_s: float = -math.inf) -> None:
-        """Recognise the scans waiting for navigation: those whose end is ``SMOOTHING_WINDOW_S`` behind the newest
+        """Recognise the scans waiting for navigation: those whose end is ``deskew_lookahead_s`` behind the newest
         stamp (every navigation sample up to there has come), those starting before ``before_s`` (the filters are
         about to pass them), or all of them (``final``)."""
         while self._waiting:
             msg, up, first_s = self._waiting[0]
-            if not (final or msg.end_stamp_s + SMOOTHING_WINDOW_S <= self._newest or first_s <= before_s):
+            if not (final or msg.end_stamp_s + self._lookahead_s <= self._newest or first_s <= before_s):
                 return
             self._waiting.pop(0)
             self._submit(msg, up, self._scan_motion(msg), first_s)
@@ -220,7 +221,8 @@ class Runner:
     def _scan_motion(self, msg: Scan):
         """The vehicle's motion over a scan from the navigation held (None: no navigation over the scan, counted
         in ``counts["scans_not_deskewed"]``)."""
-        motion = self._nav.scan_motion(self.vehicle.dvl.T_vehicle_dvl.rotation, msg.point_stamps_s, msg.end_stamp_s)
+        motion = self._nav.scan_motion(self.vehicle.dvl.T_vehicle_dvl.rotation, msg.point_stamps_s, msg.end_stamp_s,
+                                       lookahead_s=self._lookahead_s)
         if motion is None:
             self.counts["scans_not_deskewed"] = self.counts.get("scans_not_deskewed", 0) + 1
         return motion

@@ -126,6 +126,27 @@ def test_deskew_setting_is_a_boolean():
         PipelineConfig(deskew="yes")
 
 
+@pytest.mark.parametrize("bad", [-0.1, 1.5, True, "0.5", float("nan")])
+def test_deskew_lookahead_is_seconds_from_zero_to_one(bad):
+    assert PipelineConfig().deskew_lookahead_s == 0.5 and PipelineConfig(deskew_lookahead_s=0).deskew_lookahead_s == 0
+    with pytest.raises(InputError, match="deskew_lookahead_s"):
+        PipelineConfig(deskew_lookahead_s=bad)
+
+
+def test_no_navigation_after_the_lookahead_enters_the_motion():
+    """A wild DVL sample after the scan's end changes the motion only when the lookahead reaches it."""
+    t0, t1 = 10.0, 10.33
+    ta, rpy, td, v, ok = navigation(t0, t1, np.array([0.3, 0.0, 0.0]), 0.0, rate_att=20.0)
+    late = td > t1 + 0.05
+    assert late.any()
+    v_wild = v.copy()
+    v_wild[late] = [3.0, 2.0, 1.0]
+    for lookahead_s, same in ((0.0, True), (0.5, False)):
+        a = scan_motion(ta, rpy, td, v, ok, np.eye(3), t0, t1, lookahead_s=lookahead_s)
+        b = scan_motion(ta, rpy, td, v_wild, ok, np.eye(3), t0, t1, lookahead_s=lookahead_s)
+        assert np.array_equal(a.p_world_vehicle_m, b.p_world_vehicle_m) is same
+
+
 def test_a_pose_reexpressed_in_another_sensor_frame_keeps_its_world_pose_and_turns_its_covariance():
     from semslam.pipeline.deskew import reexpressed
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ...errors import SemslamError, SlamError
-from ...pipeline.deskew import deskews
+from ...pipeline.deskew import deskew_lookahead_s, deskews
 from ..messages import Attitude, Depth, Dvl, Scan
 from .live_deskew import DeskewQueue
 from .live_health import LogTally, live_health
@@ -153,7 +153,8 @@ class LiveSlam:
         self._recent_attitude: list[tuple[float, np.ndarray]] = []  # arrived, newer than the filter's time
         self._recent_dvl: list[tuple[float, np.ndarray]] = []  # valid DVL samples, newer than the filter's time
         self._held: list = []        # navigation waiting behind a scan in recognition: (message, wall)
-        self._deskew = DeskewQueue(vehicle.dvl.T_vehicle_dvl.rotation)  # scans waiting for the navigation
+        self._deskew = DeskewQueue(vehicle.dvl.T_vehicle_dvl.rotation,  # scans waiting for the navigation
+                                   deskew_lookahead_s(recognizer))
         self._pending: list[ScanJob] = []  # scans waiting for or in recognition, in stamp order
         self._n_scans = 0
         #: when the message last given to the runner was received (``time.monotonic()``): latency statistics

@@ -18,8 +18,9 @@ NAVIGATION_WAIT_S = 1.0
 class DeskewQueue:
     """Attitude and DVL as they come, and the scan jobs waiting for them (each gets ``job.motion``)."""
 
-    def __init__(self, R_vehicle_dvl: Any) -> None:
+    def __init__(self, R_vehicle_dvl: Any, lookahead_s: float = SMOOTHING_WINDOW_S) -> None:
         self.R_vehicle_dvl = R_vehicle_dvl
+        self.lookahead_s = float(lookahead_s)  # PipelineConfig.deskew_lookahead_s
         self.nav = NavigationHistory()
         self.newest_s = -math.inf
         self.waiting: list = []
@@ -35,15 +36,16 @@ class DeskewQueue:
         self.last_wall_s = time.monotonic()
 
     def ready(self, final: bool) -> list:
-        """The jobs whose navigation has come (up to ``SMOOTHING_WINDOW_S`` after their end), all of them when no
+        """The jobs whose navigation has come (up to ``lookahead_s`` after their end), all of them when no
         navigation came for ``NAVIGATION_WAIT_S`` of wall clock, or all (``final``), with their motion (None: counted
         in ``not_deskewed``), abandoned ones dropped."""
         now = time.monotonic()
         stopped = now - self.last_wall_s > NAVIGATION_WAIT_S
-        out = [j for j in self.waiting if final or j.end_s + SMOOTHING_WINDOW_S <= self.newest_s
+        out = [j for j in self.waiting if final or j.end_s + self.lookahead_s <= self.newest_s
                or (stopped and now - j.received_wall_s > NAVIGATION_WAIT_S)]
         for job in out:
             self.waiting.remove(job)
-            job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s)
+            job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s,
+                                              lookahead_s=self.lookahead_s)
             self.not_deskewed += job.motion is None
         return [j for j in out if not j.abandoned]
