@@ -6,6 +6,7 @@ navigation messages dropped; and the node process's CPU time and peak RSS (psuti
 
     .venv/bin/python benchmarks/ros_node.py [--work /tmp/semslam_ros_bench] [--rates 1 4] [--points 320]
     .venv/bin/python benchmarks/ros_node.py --dive /tmp/bag30 --rates 2    # RSS over bag_stream's 30-min dive
+    .venv/bin/python benchmarks/ros_node.py --rates 1 --config LA0.toml    # [pipeline] deskew_lookahead_s = 0
 
 Everything started is stopped by PID (its process group); the load average is printed with every figure.
 """
@@ -72,7 +73,7 @@ def _stop(proc: subprocess.Popen, timeout: float = 60.0) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
 
 
-def run_once(files: dict, rate: float, work: Path) -> dict:
+def run_once(files: dict, rate: float, work: Path, config: str | None = None) -> dict:
     import psutil
     import rosgraph
 
@@ -92,10 +93,12 @@ def run_once(files: dict, rate: float, work: Path) -> dict:
         procs.append(core)
         while not rosgraph.is_master_online(master_uri=uri):
             time.sleep(0.1)
-        node = subprocess.Popen([sys.executable, "-m", "semslam.run.ros1.node", "--db", str(files["db"]), "--topics",
-                                 str(files["topics"]), "--vehicle", str(files["vehicle"]), "--out", str(out),
-                                 "--overwrite"], env=env, stdout=open(work / f"node_r{rate:g}.log", "w"),
-                                stderr=subprocess.STDOUT, start_new_session=True)
+        cmd = ([sys.executable, "-m", "semslam.run.ros1.node"] if config is None else
+               [sys.executable, "-m", "semslam.cli.main", "ros", "--config", str(config)])
+        node = subprocess.Popen(cmd + ["--db", str(files["db"]), "--topics", str(files["topics"]), "--vehicle",
+                                       str(files["vehicle"]), "--out", str(out), "--overwrite"], env=env,
+                                stdout=open(work / f"node_r{rate:g}.log", "w"), stderr=subprocess.STDOUT,
+                                start_new_session=True)
         procs.append(node)
         master = rosgraph.Master("/bench", master_uri=uri)
         while not any(t == "/semslam/scans" for t, _ in master.getSystemState()[1]):
@@ -152,6 +155,8 @@ def main() -> int:
     ap.add_argument("--points", type=int, default=320, help="scan lines = points per line (320: ~100k points)")
     ap.add_argument("--dive", help="a directory with dive.bag, topics.toml and vehicle.toml (e.g. the 30-minute "
                     "dive of `bag_stream.py --format ros1`) instead of the simulated 24 s dive")
+    ap.add_argument("--config", help="a run configuration file for the node (`semslam ros --config`), e.g. one "
+                    "with [pipeline] deskew_lookahead_s = 0 for the lowest scan latency")
     args = ap.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -166,7 +171,7 @@ def main() -> int:
     else:
         files = make_dive(work, args.points)
     for rate in args.rates:
-        r = run_once(files, rate, work)
+        r = run_once(files, rate, work, args.config)
         print(f"-r {rate:g} ({_load()}): scan->detections p50 {r['scan_to_detections_p50_ms']:.0f} ms, "
               f"p90 {r['scan_to_detections_p90_ms']:.0f} ms; navigation->odometry p50 "
               f"{r['navigation_to_odometry_p50_ms']:.2f} ms, p90 {r['navigation_to_odometry_p90_ms']:.2f} ms; "
