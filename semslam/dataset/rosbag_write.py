@@ -106,7 +106,9 @@ def _messages(ds: Dataset, store, T, scans=None):
             msg = encode_pointcloud2(cloud.points_xyz_m, intensity=cloud.intensity, time_offset_s=offs,
                                      time_field="t", time_encoding="float64_s", frame_id="scanner", stamp_ns=start_ns,
                                      typestore=store)
-            yield start_ns, 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg
+            # recorded when a driver publishes it, after its last point (the header keeps the first point's stamp,
+            # as Velodyne / Ouster drivers do): a replay delivers the scan when a live vehicle would
+            yield _ns(rec.end_stamp_s), 3, "/semslam/scans", "sensor_msgs/msg/PointCloud2", msg
     # the scanner's mounting as a vehicle's URDF publishes it: base_link (FLU) -> scanner, once, on /tf_static
     from ..geometry import RigidTransform, quat_wxyz_from_rotation
     from ..io.ros import C_FRD_FLU
