@@ -156,3 +156,61 @@ def test_the_live_node_waits_for_a_scans_navigation_while_it_keeps_coming(monkey
         assert q.ready(final=False) == []  # waited far longer than NAVIGATION_WAIT_S, but navigation keeps coming
     clock["t"] += NAVIGATION_WAIT_S + 0.1  # the navigation stopped
     assert q.ready(final=False) == [job] and job.motion is not None and q.not_deskewed == 0
+
+
+def test_the_live_node_waits_for_each_navigation_kind_as_the_topics_arrive_apart(monkeypatch):
+    """Attitude and DVL come on their own connections: a scan whose window the attitude has passed still waits for
+    the DVL samples of its window, so it is deskewed as offline; a DVL that stops is waited for NAVIGATION_WAIT_S of
+    wall clock, not forever."""
+    from types import SimpleNamespace
+
+    from semslam.pipeline.deskew import NavigationHistory
+    from semslam.run.ros1 import live_deskew
+    from semslam.run.ros1.live_deskew import NAVIGATION_WAIT_S, DeskewQueue
+
+    clock = {"t": 100.0}
+    monkeypatch.setattr(live_deskew.time, "monotonic", lambda: clock["t"])
+    stamps = np.linspace(9.67, 10.0, 50)
+
+    def job():
+        return SimpleNamespace(end_s=10.0, received_wall_s=100.0, abandoned=False, motion=None,
+                               scan=SimpleNamespace(point_stamps_s=stamps))
+
+    def att(t):
+        return SimpleNamespace(kind="attitude", stamp_s=float(t), rpy_rad=np.array([0.0, 0.0, 0.2 * t]))
+
+    def dvl(t):
+        return SimpleNamespace(kind="dvl", stamp_s=float(t), velocity_mps=np.array([0.3 + 0.05 * t, 0.0, 0.0]),
+                               valid=True)
+
+    nav_t = np.arange(8.0, 11.0, 0.05)
+    q, j = DeskewQueue(np.eye(3)), job()
+    q.waiting.append(j)
+    for t in nav_t:
+        q.add_navigation(att(t))
+    for t in nav_t[nav_t <= 10.3]:
+        q.add_navigation(dvl(t))
+    assert q.ready(final=False) == []  # the attitude is past the window, the DVL is not
+    for t in nav_t[nav_t > 10.3]:
+        q.add_navigation(dvl(t))
+    assert q.ready(final=False) == [j]
+    # the same motion as from every sample in stamp order (the offline runner's)
+    ref = NavigationHistory()
+    for t in nav_t:
+        ref.add_attitude(t, att(t).rpy_rad)
+        ref.add_dvl(t, dvl(t).velocity_mps, True)
+    want = ref.scan_motion(np.eye(3), stamps, 10.0, lookahead_s=q.lookahead_s)
+    assert j.motion is not None and want is not None
+    for name in vars(want):
+        np.testing.assert_array_equal(getattr(j.motion, name), getattr(want, name))
+    # the DVL stops short of the window while the attitude keeps coming: given up on after NAVIGATION_WAIT_S
+    q, j = DeskewQueue(np.eye(3)), job()
+    q.waiting.append(j)
+    for t in nav_t[nav_t <= 10.2]:
+        q.add_navigation(dvl(t))
+    for k, t in enumerate(nav_t):
+        clock["t"] = 100.0 + 0.01 * k
+        q.add_navigation(att(t))
+        assert q.ready(final=False) == []
+    clock["t"] = 100.0 + NAVIGATION_WAIT_S + 0.1
+    assert q.ready(final=False) == [j] and j.motion is not None

@@ -9,10 +9,13 @@ from typing import Any
 
 from ...pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory
 
-#: wall-clock seconds without any navigation message after which the scans still waiting for theirs are deskewed with
-#: what came (:meth:`LiveSlam.poll`): the navigation stopped, or a recording ended. While navigation keeps coming,
-#: however slowly (a loaded machine), a scan waits for its own, so a replay gives the offline detections
+#: wall-clock seconds without a message of one navigation kind (attitude, DVL) after which the scans still waiting
+#: for it are deskewed without waiting for that kind any longer (:meth:`LiveSlam.poll`): it stopped, or a recording
+#: ended. While each kind keeps coming, however slowly (a loaded machine), a scan waits for its own, so a replay
+#: gives the offline detections
 NAVIGATION_WAIT_S = 1.0
+
+_NAV_KINDS = ("attitude", "dvl")
 
 
 class DeskewQueue:
@@ -22,27 +25,34 @@ class DeskewQueue:
         self.R_vehicle_dvl = R_vehicle_dvl
         self.lookahead_s = float(lookahead_s)  # PipelineConfig.deskew_lookahead_s
         self.nav = NavigationHistory()
-        self.newest_s = -math.inf
+        # per kind: each topic comes on its own connection, so one may run ahead of the other (measured: a loaded
+        # CI machine deskewed a scan before the DVL samples of its window had come, the attitude being past it)
+        self.newest_s = {k: -math.inf for k in _NAV_KINDS}
+        self.last_wall_s = {k: -math.inf for k in _NAV_KINDS}  # when its last message came (time.monotonic())
         self.waiting: list = []
         self.not_deskewed = 0
-        self.last_wall_s = -math.inf  # when the last navigation message came (time.monotonic())
 
     def add_navigation(self, msg: Any) -> None:
         if msg.kind == "attitude":
             self.nav.add_attitude(msg.stamp_s, msg.rpy_rad)
         else:
             self.nav.add_dvl(msg.stamp_s, msg.velocity_mps, msg.valid)
-        self.newest_s = max(self.newest_s, msg.stamp_s)
-        self.last_wall_s = time.monotonic()
+        kind = "attitude" if msg.kind == "attitude" else "dvl"
+        self.newest_s[kind] = max(self.newest_s[kind], msg.stamp_s)
+        self.last_wall_s[kind] = time.monotonic()
+
+    def _has_come(self, job: Any, now: float) -> bool:
+        """Has every navigation kind come up to ``lookahead_s`` after the job's end, or stopped (none of it for
+        ``NAVIGATION_WAIT_S`` of wall clock, counted from the job's arrival at the latest)?"""
+        due = job.end_s + self.lookahead_s
+        return all(self.newest_s[k] >= due or now - max(self.last_wall_s[k], job.received_wall_s) > NAVIGATION_WAIT_S
+                   for k in _NAV_KINDS)
 
     def ready(self, final: bool) -> list:
-        """The jobs whose navigation has come (up to ``lookahead_s`` after their end), all of them when no
-        navigation came for ``NAVIGATION_WAIT_S`` of wall clock, or all (``final``), with their motion (None: counted
-        in ``not_deskewed``), abandoned ones dropped."""
+        """The jobs whose navigation has come (:meth:`_has_come`), or all (``final``), with their motion (None:
+        counted in ``not_deskewed``), abandoned ones dropped."""
         now = time.monotonic()
-        stopped = now - self.last_wall_s > NAVIGATION_WAIT_S
-        out = [j for j in self.waiting if final or j.end_s + self.lookahead_s <= self.newest_s
-               or (stopped and now - j.received_wall_s > NAVIGATION_WAIT_S)]
+        out = [j for j in self.waiting if final or self._has_come(j, now)]
         for job in out:
             self.waiting.remove(job)
             job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s,
