@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg.lapack import dpotrf, dpotrs
 
 __all__ = ["NodeStore", "RtsRecorder", "SmoothedStates"]
 
@@ -209,8 +209,10 @@ class NodeStore:
         self._file.seek(offset)
         out = []
         for shape, dtype in layout:
-            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-            out.append(np.frombuffer(self._file.read(n), dtype=dtype).reshape(shape).copy())
+            buf = bytearray(int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize)
+            if self._file.readinto(buf) != len(buf):
+                raise OSError("The smoother's temporary file ended early.")
+            out.append(np.frombuffer(buf, dtype=dtype).reshape(shape))  # writable: the bytearray is its own
         return tuple(out)
 
     def close(self) -> None:
@@ -250,13 +252,13 @@ def _gain(PFt: np.ndarray, P_pr: np.ndarray) -> np.ndarray:
     pseudo-inverse when that is not positive definite (states with no variance left)."""
     d = np.sqrt(np.diagonal(P_pr))
     if d.min() > 1e-9 * d.max():
-        Pn = P_pr / np.outer(d, d)
-        try:
-            c = cho_factor(Pn, check_finite=False)
-        except np.linalg.LinAlgError:
-            pass
-        else:
-            return (cho_solve(c, (PFt / d).T, check_finite=False) / d[:, None]).T
+        # LAPACK's potrf/potrs as scipy's cho_factor/cho_solve call them (the same numbers), without their argument
+        # checks: ~0.1 ms of a ~0.3 ms backward step, at every node of the dive
+        c, info = dpotrf(P_pr / np.outer(d, d), lower=0, clean=0)
+        if info == 0:
+            x, info = dpotrs(c, (PFt / d).T, lower=0)
+            if info == 0:
+                return (x / d[:, None]).T
     return PFt @ _pinv_psd(P_pr)
 
 
