@@ -80,6 +80,7 @@ def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult
         objects = cloud[np.concatenate(seg.cluster_indices)] if seg.cluster_indices else cloud[:0]
         image = RangeImage.build_scene(cloud, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m,
                                        occluder_points=np.vstack([objects, points]))
+    image = image.with_camera(pc.camera_offset_m)
     T_os = np.linalg.inv(T_scanner_object.matrix)
     return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
                                        model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])

@@ -145,7 +145,7 @@ def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz
 
 @njit(cache=True, nogil=True, parallel=True)
 def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell_uv, range_min, tol_m, unseen_bad,
-                    occluder_min):
+                    occluder_min, camera):
     """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
 
     A model point (object frame) is mapped into the scanner frame by the inverse hypothesis; it is
@@ -158,6 +158,10 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     counted at all (the scanner did not look there); a point more than ``tol_m`` behind the observed surface is
     hidden if an object (``occluder_min``, same grid: the smallest range of the scene's objects, not its planes) is
     in front of it, and contradicts the scan if only a plane is (the object would be inside the floor).
+
+    With a ``camera`` (3,) (the camera of a triangulation laser scanner, same frame as ``viewpoint``; NaN: none), a
+    point is measured only where the camera sees the laser's spot too: a model point facing away from the camera,
+    or hidden from it by the model itself (:func:`_camera_hidden`), is not predicted visible (not counted).
 
     Computed in the object frame: with ``c = t + R viewpoint`` (the scanner in the object frame) the ray is
     ``r = R^T (p_o - c)``, so the facing test is ``n_o . (p_o - c) < 0``, the range ``|p_o - c|`` and the
@@ -181,6 +185,7 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
         g20 = F[2, 0] * R[0, 0] + F[2, 1] * R[0, 1] + F[2, 2] * R[0, 2]
         g21 = F[2, 0] * R[1, 0] + F[2, 1] * R[1, 1] + F[2, 2] * R[1, 2]
         g22 = F[2, 0] * R[2, 0] + F[2, 1] * R[2, 1] + F[2, 2] * R[2, 2]
+        hidden = _camera_hidden(R, ts[h], model_pts, model_nrm, camera, 1.0 / inv_cell_uv, tol_m)
         n_front = 0
         n_bad = 0
         for m in range(M):
@@ -188,6 +193,8 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
             a1 = model_pts[m, 1] - c1
             a2 = model_pts[m, 2] - c2
             if model_nrm[m, 0] * a0 + model_nrm[m, 1] * a1 + model_nrm[m, 2] * a2 >= 0.0:  # facing away
+                continue
+            if hidden[m]:  # the camera cannot see the laser's spot there: no return expected
                 continue
             n_front += 1
             z = g20 * a0 + g21 * a1 + g22 * a2
@@ -218,6 +225,89 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
                 n_bad += 1
         out[h] = n_bad / max(n_front, 1)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _camera_hidden(R, t, model_pts, model_nrm, camera, cell_rad, tol_m):
+    """Per model point (M,): True where the camera (scanner frame; NaN: none, every point False) cannot see it under
+    the hypothesis ``(R, t)`` (object <- scanner): it faces away from the camera, or another model point lies in
+    front of it along the camera's ray. The model is splatted into a z-buffer about the camera's ray to the model's
+    centre (gnomonic, angular cell ``cell_rad``: the range image's); a point is hidden when the smallest camera range
+    over its 3 x 3 cells is nearer than its own by more than ``tol_m`` plus two cell footprints (a steep surface
+    does not hide itself)."""
+    M = model_pts.shape[0]
+    hidden = np.zeros(M, dtype=np.bool_)
+    if not (np.isfinite(camera[0]) and np.isfinite(camera[1]) and np.isfinite(camera[2])) or M == 0:
+        return hidden
+    k0 = t[0] + R[0, 0] * camera[0] + R[0, 1] * camera[1] + R[0, 2] * camera[2]  # the camera in the object frame
+    k1 = t[1] + R[1, 0] * camera[0] + R[1, 1] * camera[1] + R[1, 2] * camera[2]
+    k2 = t[2] + R[2, 0] * camera[0] + R[2, 1] * camera[1] + R[2, 2] * camera[2]
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    for m in range(M):
+        m0 += model_pts[m, 0]
+        m1 += model_pts[m, 1]
+        m2 += model_pts[m, 2]
+    m0 /= M
+    m1 /= M
+    m2 /= M
+    r2 = 0.0
+    for m in range(M):
+        r2 = max(r2, (model_pts[m, 0] - m0) ** 2 + (model_pts[m, 1] - m1) ** 2 + (model_pts[m, 2] - m2) ** 2)
+    z0, z1, z2 = m0 - k0, m1 - k1, m2 - k2
+    d2 = z0 * z0 + z1 * z1 + z2 * z2
+    if d2 <= 1.0001 * r2 or cell_rad <= 0.0:  # the camera inside the model's sphere: no image of it
+        return hidden
+    dn = np.sqrt(d2)
+    z0, z1, z2 = z0 / dn, z1 / dn, z2 / dn
+    # image axes x, y orthogonal to z
+    if abs(z2) < 0.9:
+        x0, x1, x2 = z1, -z0, 0.0  # z x (0, 0, 1)
+    else:
+        x0, x1, x2 = 0.0, z2, -z1  # z x (1, 0, 0)
+    xn = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    x0, x1, x2 = x0 / xn, x1 / xn, x2 / xn
+    y0, y1, y2 = z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0
+    half = np.sqrt(r2 / (d2 - r2)) * 1.05 + 2.0 * cell_rad  # tan of the model's half angle, with a margin
+    n = min(int(np.ceil(2.0 * half / cell_rad)) + 1, 512)
+    cell = 2.0 * half / (n - 1)
+    zbuf = np.full((n, n), np.inf)
+    ii = np.full(M, -1, np.int64)
+    jj = np.zeros(M, np.int64)
+    rc = np.empty(M)
+    for m in range(M):
+        a0 = model_pts[m, 0] - k0
+        a1 = model_pts[m, 1] - k1
+        a2 = model_pts[m, 2] - k2
+        if model_nrm[m, 0] * a0 + model_nrm[m, 1] * a1 + model_nrm[m, 2] * a2 >= 0.0:  # facing away from the camera
+            hidden[m] = True
+            continue
+        z = z0 * a0 + z1 * a1 + z2 * a2
+        if z <= 1e-9:
+            hidden[m] = True
+            continue
+        fi = np.floor(((x0 * a0 + x1 * a1 + x2 * a2) / z + half) / cell)
+        fj = np.floor(((y0 * a0 + y1 * a1 + y2 * a2) / z + half) / cell)
+        if not (fi >= 0.0 and fj >= 0.0 and fi < n and fj < n):
+            continue
+        i, j = int(fi), int(fj)
+        r = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        ii[m], jj[m], rc[m] = i, j, r
+        if r < zbuf[i, j]:
+            zbuf[i, j] = r
+    for m in range(M):
+        i = ii[m]
+        if i < 0 or hidden[m]:
+            continue
+        j = jj[m]
+        near = np.inf
+        for a in range(max(i - 1, 0), min(i + 2, n)):
+            for b in range(max(j - 1, 0), min(j + 2, n)):
+                near = min(near, zbuf[a, b])
+        if rc[m] > near + tol_m + 2.0 * cell * rc[m]:
+            hidden[m] = True
+    return hidden
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -301,7 +301,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m
-        else ())
+        else (), camera_offset_m=cfg.camera_offset_m)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m

@@ -50,6 +50,10 @@ class PoseConfig:
     visibility_tol_m: float = 0.01
     #: Angular cell of the cluster's range image, as a length at the cluster's range.
     image_cell_m: float = 0.008
+    #: The camera of a triangulation laser scanner, from the laser (the scan's viewpoint), in the scan's frame
+    #: (``ScannerSpec.camera_xyz_m`` of the vehicle file): the visibility term expects no return where the camera
+    #: cannot see the laser's spot (its shadows). None: one viewpoint (a lidar, a time-of-flight or depth camera).
+    camera_offset_m: tuple | None = None
     #: Coarse-to-fine ranking: a grid of ``n_coarse_rotations`` is ranked first, and only the fine-grid
     #: children of its ``n_coarse_keep`` best orientations are ranked next (0 = rank the whole fine grid).
     #: 512 / 64 (was 1024 / 128: the same ~512 fine orientations ranked, half the coarse pass) with
@@ -149,6 +153,9 @@ class PoseConfig:
             raise InputError(f"The 'local_refine_steps_deg' argument of {c} must be a tuple of positive angles "
                              f"(degrees). Got {steps!r} instead.")
         object.__setattr__(self, "local_refine_steps_deg", tuple(float(v) for v in steps))
+        if self.camera_offset_m is not None:
+            cam = as_float_array("camera_offset_m", self.camera_offset_m, (3,), caller=c)
+            object.__setattr__(self, "camera_offset_m", tuple(float(v) for v in cam))
         check_choice("icp_method", self.icp_method, tuple(ICP_METHODS), caller=c)
         check_choice("coarse_selection", self.coarse_selection, ("msac", "error"), caller=c)
         check_choice("coarse_method", self.coarse_method, ("grid", "ransac"), caller=c)

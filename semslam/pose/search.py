@@ -114,8 +114,8 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       n_keep: int = 5, n_candidates: int = 512, n_coarse_points: int = 48,
                       min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
-                      start_separation_m: float = 0.015, local_steps_rad: tuple = ()
-                      ) -> tuple[list[Hypothesis], RangeImage]:
+                      start_separation_m: float = 0.015, local_steps_rad: tuple = (),
+                      camera_offset_m: tuple | None = None) -> tuple[list[Hypothesis], RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of
     ``n_coarse_points`` of the points ranks all orientations; the ``n_candidates`` best are aligned and fitted
@@ -163,7 +163,7 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                             np.asarray(truncations_m[-2:], dtype=np.float64), float(tau_m))
     # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
     cand = np.argsort(fit, kind="stable")[:n_candidates]
-    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m)
+    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m).with_camera(camera_offset_m)
     vis = image.visibility_cost(Rs[cand], ts[cand], model_vis_pts, model_vis_nrm, visibility_tol_m)
     score = fit[cand] + visibility_weight * vis
     order = np.argsort(score, kind="stable")

@@ -9,13 +9,15 @@ cluster, queried for every hypothesis.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .._validation import check_int
 from . import _search_kernels as K
+
+_NO_CAMERA = np.full(3, np.nan)
 
 @dataclass(frozen=True, eq=False)
 class DistanceField:
@@ -95,6 +97,9 @@ class RangeImage:
     range_min: np.ndarray
     #: :meth:`build_scene` with occluders: the smallest range of the scene's objects per cell (inf: none)
     occluder_min: np.ndarray | None = None
+    #: the camera of a triangulation laser scanner (3,), same frame as ``viewpoint`` (None: one viewpoint, as a lidar
+    #: or a depth camera): :meth:`visibility_cost` expects no return where the camera cannot see the laser's spot
+    camera: np.ndarray | None = None
 
     @classmethod
     def build(cls, points: np.ndarray, viewpoint: np.ndarray, *, cell_m: float, margin_m: float = 0.1,
@@ -176,7 +181,14 @@ class RangeImage:
             float(tol_m),
             bool(unseen_is_contradiction),
             self.range_min if self.occluder_min is None else self.occluder_min,
+            _NO_CAMERA if self.camera is None else self.camera,
         )
+
+    def with_camera(self, camera_offset_m) -> "RangeImage":
+        """The same image with the triangulation camera at ``viewpoint + camera_offset_m`` (None: none)."""
+        if camera_offset_m is None:
+            return self if self.camera is None else replace(self, camera=None)
+        return replace(self, camera=self.viewpoint + np.asarray(camera_offset_m, dtype=np.float64).reshape(3))
 
 
 @dataclass(frozen=True, eq=False)

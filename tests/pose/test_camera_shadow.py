@@ -1,0 +1,80 @@
+"""The camera of a triangulation laser scanner in the visibility term: a model point the camera cannot see (its
+shadow behind another part) is not expected in the scan. Oracle: the shadow of a rectangular roof over a floor
+plate, cast analytically (a ray from each floor point to the camera through the roof's plane)."""
+
+import numpy as np
+import pytest
+
+from semslam.pose import _search_kernels as K
+from semslam.pose.model import PoseConfig
+from semslam.pose.search import RangeImage
+
+# scanner frame, z forward (down onto the plates): the laser at the origin, the camera 0.3 m along x
+CAMERA = np.array([0.3, 0.0, 0.0])
+FLOOR_Z, ROOF_Z = 1.5, 1.2
+ROOF_X, ROOF_Y = (0.0, 0.1), (-0.1, 0.1)
+
+
+def _plates(step=0.004):
+    g = np.arange(-0.2, 0.2 + 1e-9, step)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    floor = np.c_[x.ravel(), y.ravel(), np.full(x.size, FLOOR_Z)]
+    r = np.arange(ROOF_X[0], ROOF_X[1] + 1e-9, step)
+    s = np.arange(ROOF_Y[0], ROOF_Y[1] + 1e-9, step)
+    x, y = np.meshgrid(r, s, indexing="ij")
+    roof = np.c_[x.ravel(), y.ravel(), np.full(x.size, ROOF_Z)]
+    pts = np.vstack([floor, roof])
+    nrm = np.tile([0.0, 0.0, -1.0], (len(pts), 1))  # both face the scanner
+    return pts, nrm, len(floor)
+
+
+def _under_roof(p, eye):
+    """Does the segment from floor points ``p`` to ``eye`` cross the roof rectangle?"""
+    s = (ROOF_Z - p[:, 2]) / (eye[2] - p[:, 2])
+    q = p + s[:, None] * (eye - p)
+    return (q[:, 0] >= ROOF_X[0]) & (q[:, 0] <= ROOF_X[1]) & (q[:, 1] >= ROOF_Y[0]) & (q[:, 1] <= ROOF_Y[1])
+
+
+def test_the_camera_shadow_of_a_roof_matches_the_analytic_shadow():
+    pts, nrm, n_floor = _plates()
+    hidden = K._camera_hidden(np.eye(3), np.zeros(3), pts, nrm, CAMERA, 0.008 / 1.4, 0.01)
+    want = _under_roof(pts[:n_floor], CAMERA)
+    assert want.sum() > 500 and not hidden[n_floor:].any()  # the roof is seen whole
+    # every point of the shadow is hidden; the z-buffer's 3 x 3 cells (~1.3 cm here) widen it: every other hidden
+    # point lies within 2 cm of its edge
+    assert hidden[:n_floor][want].all()
+    wrong = hidden[:n_floor] != want
+    x = pts[:n_floor, 0]
+    s = (ROOF_Z - FLOOR_Z) / (CAMERA[2] - FLOOR_Z)  # where a floor point's ray to the camera meets the roof plane
+    xr = x + s * (CAMERA[0] - x)
+    yr = pts[:n_floor, 1] * (1.0 - s)
+    edge = np.minimum.reduce([np.abs(xr - ROOF_X[0]), np.abs(xr - ROOF_X[1]), np.abs(yr - ROOF_Y[0]),
+                              np.abs(yr - ROOF_Y[1])])
+    assert (edge[wrong] < 0.02).all() and wrong.sum() < 0.4 * want.sum()
+    # no camera: nothing hidden
+    assert not K._camera_hidden(np.eye(3), np.zeros(3), pts, nrm, np.full(3, np.nan), 0.008 / 1.4, 0.01).any()
+
+
+@pytest.mark.parametrize("camera", [None, tuple(CAMERA)])
+def test_a_scan_missing_the_camera_shadow_contradicts_the_model_only_without_the_camera(camera):
+    pts, nrm, n_floor = _plates()
+    laser_seen = np.ones(len(pts), dtype=bool)
+    laser_seen[:n_floor] = ~_under_roof(pts[:n_floor], np.zeros(3))
+    measured = laser_seen.copy()
+    measured[:n_floor] &= ~_under_roof(pts[:n_floor], CAMERA)  # what a triangulation scanner returns
+    img = RangeImage.build(pts[measured], np.zeros(3), cell_m=0.008).with_camera(camera)
+    cost = img.visibility_cost(np.eye(3)[None], np.zeros((1, 3)), pts, nrm, 0.01)[0]
+    shadow_share = (laser_seen & ~measured).sum() / laser_seen.sum()
+    assert shadow_share > 0.05
+    if camera is None:
+        assert cost > 0.4 * shadow_share  # the camera's shadow taken for unseen surface (the image's dilation hides some)
+    else:
+        assert cost < 0.02
+
+
+def test_the_pose_configuration_checks_the_camera_offset():
+    from semslam.errors import InputError
+
+    assert PoseConfig(camera_offset_m=[0.3, 0, 0]).camera_offset_m == (0.3, 0.0, 0.0)
+    with pytest.raises(InputError, match="camera_offset_m"):
+        PoseConfig(camera_offset_m=(0.3, 0.0))
