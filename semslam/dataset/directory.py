@@ -316,6 +316,8 @@ def vehicle_from_simulator_dict(sim: dict, T_vehicle_scanner: RigidTransform, *,
             d["scanner"][dst] = sc[src]
     if "sweep_fov_rad" in sc:
         d["scanner"]["fov_rad"] = min(sc["sweep_fov_rad"], sc.get("line_fov_rad", sc["sweep_fov_rad"]))
+    if "baseline_m" in sc:  # the simulated triangulation scanner's camera: along the scanner's x axis
+        d["scanner"]["camera_xyz_m"] = [float(sc["baseline_m"]), 0.0, 0.0]
     return VehicleDescription.from_dict(d, source=source)
 
 

@@ -8,6 +8,7 @@ mounting, never from a particular dive. Read from a small human-written TOML fil
     xyz_m = [0.6, 0.0, 0.3]         # T_vehicle_scanner: translation (m) and Z-Y-X roll, pitch, yaw (rad) ...
     rpy_rad = [0.0, 0.0, 1.5708]    # ... or matrix = [[...], [...], [...], [...]] (4x4)
     line_count = 100                # lines per sweep: a point's line index gives its stamp
+    camera_xyz_m = [0.3, 0.0, 0.0]  # a triangulation laser's camera, from the laser, scanner frame (optional)
 
     [dvl]
     noise_abs_mps = 0.001           # white noise per axis: noise_abs_mps + noise_rel * speed
@@ -59,6 +60,11 @@ class ScannerSpec:
     max_range_m: float = 4.0
     fov_rad: float = math.radians(50.0)  #: full cone about the optical axis where detections are expected
     rate_hz: float = 3.0
+    #: the camera of a triangulation laser scanner, from the laser (the scanner frame's origin), in the scanner frame:
+    #: a point is measured only where the camera sees the laser's spot. ``db build --vehicle`` renders the laser
+    #: views with it (absent: the simulator's, 0.3 m along x); recognition may model its shadows
+    #: (``PoseConfig.camera_offset_m``, opt-in). None: the key absent
+    camera_xyz_m: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,8 @@ class VehicleDescription:
             d: dict = {}
             for f in fields(cls):
                 v = getattr(spec, f.name)
+                if v is None:  # an optional key left out (TOML has no null)
+                    continue
                 if isinstance(v, RigidTransform):
                     d[f.name] = {"matrix": [[float(x) for x in row] for row in v.matrix]}
                 elif isinstance(v, tuple):
@@ -215,6 +223,8 @@ def _value(value: Any, default: Any, key: str, source: str):
     def num(v):
         return float(check_limit(name, v, where, error=DatasetError))
 
+    if default is None and key == "scanner.camera_xyz_m":  # optional 3-vector
+        default = (0.0, 0.0, 0.0)
     if isinstance(default, tuple):
         if not isinstance(value, list) or (len(default) and len(value) != len(default) and "azimuth" not in key):
             raise DatasetError(

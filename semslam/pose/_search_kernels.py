@@ -192,9 +192,8 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
             a0 = model_pts[m, 0] - c0
             a1 = model_pts[m, 1] - c1
             a2 = model_pts[m, 2] - c2
-            if model_nrm[m, 0] * a0 + model_nrm[m, 1] * a1 + model_nrm[m, 2] * a2 >= 0.0:  # facing away
-                continue
-            if hidden[m]:  # the camera cannot see the laser's spot there: no return expected
+            # facing away, or where the camera cannot see the laser's spot: no return expected
+            if model_nrm[m, 0] * a0 + model_nrm[m, 1] * a1 + model_nrm[m, 2] * a2 >= 0.0 or hidden[m]:
                 continue
             n_front += 1
             z = g20 * a0 + g21 * a1 + g22 * a2

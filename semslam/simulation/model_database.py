@@ -40,8 +40,9 @@ LASER_CUT_VIEWS = 16
 
 def scanner_from_vehicle(vehicle: Any) -> ScannerConfig:
     """The simulated laser scanner of a vehicle file (:class:`~semslam.dataset.VehicleDescription`, or the path of
-    its TOML): its mounting, field of view (the same across and along the sweep), lines per sweep, rate and range;
-    the rest (points per line, camera baseline, noise) the simulator's defaults."""
+    its TOML): its mounting, field of view (the same across and along the sweep), lines per sweep, rate, range and
+    camera (``scanner.camera_xyz_m``: the simulator's camera lies along the scanner's x axis); the rest (points per
+    line, noise; the camera when the file gives none) the simulator's defaults."""
     import math
 
     from ..dataset.vehicle import VehicleDescription, read_vehicle_toml
@@ -59,7 +60,15 @@ def scanner_from_vehicle(vehicle: Any) -> ScannerConfig:
     if not (0 < fov < math.pi):
         raise InputError(f"The scanner's 'fov_rad' of the vehicle file must be in (0, pi) to render laser views. "
                          f"Got {fov!r} instead.")
+    baseline = default.baseline_m
+    if sc.camera_xyz_m is not None:
+        cam = [float(v) for v in sc.camera_xyz_m]
+        if not (cam[0] > 0 and math.hypot(cam[1], cam[2]) <= 1e-3 * cam[0]):
+            raise InputError(f"The scanner's 'camera_xyz_m' of the vehicle file must lie along the scanner's +x axis "
+                             f"to render laser views (the simulator's triangulation scanner). Got {cam} instead.")
+        baseline = cam[0]
     return dataclasses.replace(default, n_lines=int(sc.line_count) or default.n_lines, sweep_fov_rad=fov,
+                               baseline_m=baseline,
                                line_fov_rad=fov, scan_rate_hz=float(sc.rate_hz), min_range_m=float(sc.min_range_m),
                                max_range_m=float(sc.max_range_m),
                                T_vehicle_scanner_xyz_m=tuple(float(v) for v in xyz_rpy[:3]),

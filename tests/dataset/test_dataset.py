@@ -285,6 +285,8 @@ def test_girona500_defaults_are_the_simulated_sensors_figures():
     default = VehicleDescription.girona500().to_dict()
     for section in ("dvl", "attitude", "depth"):
         assert sim[section] == default[section], section
+    # the simulated triangulation scanner's camera is in its vehicle file (0.3 m along the scanner's x axis)
+    assert sim["scanner"]["camera_xyz_m"] == [SimulatorConfig().scanner.baseline_m, 0.0, 0.0]
 
 
 def test_mission_log_errors_name_the_file(sim_mission, tmp_path):

@@ -50,6 +50,24 @@ def test_a_vehicles_scanner_sets_mounting_field_of_view_lines_and_range():
         scanner_from_vehicle(42)
 
 
+def test_a_vehicles_triangulation_camera_sets_the_rendered_baseline(tmp_path):
+    """`scanner.camera_xyz_m` of a vehicle file is the rendering scanner's camera (the simulator's lies along the
+    scanner's x axis: another direction is refused, naming the key); the key absent: the simulator's 0.3 m."""
+    assert scanner_from_vehicle(_vehicle()).baseline_m == ScannerConfig().baseline_m
+    assert scanner_from_vehicle(_vehicle(camera_xyz_m=(0.15, 0.0, 0.0))).baseline_m == 0.15
+    with pytest.raises(InputError, match="camera_xyz_m"):
+        scanner_from_vehicle(_vehicle(camera_xyz_m=(0.0, 0.2, 0.0)))
+    # the file round trip: written when set, left out when not (TOML has no null)
+    path = tmp_path / "vehicle.toml"
+    write_vehicle_toml(_vehicle(camera_xyz_m=(0.25, 0.0, 0.01)), path)
+    assert "camera_xyz_m = [" in path.read_text()
+    from semslam.dataset import read_vehicle_toml
+
+    assert read_vehicle_toml(path).scanner.camera_xyz_m == (0.25, 0.0, 0.01)
+    write_vehicle_toml(_vehicle(), path)
+    assert "camera_xyz_m" not in path.read_text() and read_vehicle_toml(path).scanner.camera_xyz_m is None
+
+
 def test_laser_views_whole_and_cut_are_reproducible(tee):
     views, classes = sensor_view_clouds(tee, sensor="laser", seed=4, laser_views=6, laser_cut_views=3)
     ids = [v[1] for v in views]
