@@ -161,7 +161,7 @@ def test_the_live_node_waits_for_a_scans_navigation_while_it_keeps_coming(monkey
 def test_the_live_node_waits_for_each_navigation_kind_as_the_topics_arrive_apart(monkeypatch):
     """Attitude and DVL come on their own connections: a scan whose window the attitude has passed still waits for
     the DVL samples of its window, so it is deskewed as offline; a DVL that stops is waited for NAVIGATION_WAIT_S of
-    wall clock, not forever."""
+    wall clock, not forever, and once silent that long it is not waited for."""
     from types import SimpleNamespace
 
     from semslam.pipeline.deskew import NavigationHistory
@@ -214,3 +214,9 @@ def test_the_live_node_waits_for_each_navigation_kind_as_the_topics_arrive_apart
         assert q.ready(final=False) == []
     clock["t"] = 100.0 + NAVIGATION_WAIT_S + 0.1
     assert q.ready(final=False) == [j] and j.motion is not None
+    # the DVL silent for longer than that already (an outage): a new scan does not wait for it at all
+    j2 = job()
+    j2.received_wall_s = clock["t"]
+    q.waiting.append(j2)
+    q.add_navigation(att(11.0))
+    assert q.ready(final=False) == [j2]

@@ -42,11 +42,17 @@ class DeskewQueue:
         self.last_wall_s[kind] = time.monotonic()
 
     def _has_come(self, job: Any, now: float) -> bool:
-        """Has every navigation kind come up to ``lookahead_s`` after the job's end, or stopped (none of it for
-        ``NAVIGATION_WAIT_S`` of wall clock, counted from the job's arrival at the latest)?"""
+        """Has every navigation kind come up to ``lookahead_s`` after the job's end, or stopped? A kind has stopped
+        when none of it came for ``NAVIGATION_WAIT_S`` of wall clock (a DVL silent through an outage is not waited
+        for); one that never came is waited for that long after the job's arrival (the node has just started)."""
         due = job.end_s + self.lookahead_s
-        return all(self.newest_s[k] >= due or now - max(self.last_wall_s[k], job.received_wall_s) > NAVIGATION_WAIT_S
-                   for k in _NAV_KINDS)
+        for k in _NAV_KINDS:
+            if self.newest_s[k] >= due:
+                continue
+            since = job.received_wall_s if self.last_wall_s[k] == -math.inf else self.last_wall_s[k]
+            if now - since <= NAVIGATION_WAIT_S:
+                return False
+        return True
 
     def ready(self, final: bool) -> list:
         """The jobs whose navigation has come (:meth:`_has_come`), or all (``final``), with their motion (None:
