@@ -241,20 +241,9 @@ def _camera_hidden(R, t, model_pts, model_nrm, camera, cell_rad, tol_m):
     k0 = t[0] + R[0, 0] * camera[0] + R[0, 1] * camera[1] + R[0, 2] * camera[2]  # the camera in the object frame
     k1 = t[1] + R[1, 0] * camera[0] + R[1, 1] * camera[1] + R[1, 2] * camera[2]
     k2 = t[2] + R[2, 0] * camera[0] + R[2, 1] * camera[1] + R[2, 2] * camera[2]
-    m0 = 0.0
-    m1 = 0.0
-    m2 = 0.0
-    for m in range(M):
-        m0 += model_pts[m, 0]
-        m1 += model_pts[m, 1]
-        m2 += model_pts[m, 2]
-    m0 /= M
-    m1 /= M
-    m2 /= M
-    r2 = 0.0
-    for m in range(M):
-        r2 = max(r2, (model_pts[m, 0] - m0) ** 2 + (model_pts[m, 1] - m1) ** 2 + (model_pts[m, 2] - m2) ** 2)
-    z0, z1, z2 = m0 - k0, m1 - k1, m2 - k2
+    centre = np.array([model_pts[:, 0].mean(), model_pts[:, 1].mean(), model_pts[:, 2].mean()])
+    r2 = ((model_pts - centre) ** 2).sum(axis=1).max()  # the model's bounding sphere about its centroid
+    z0, z1, z2 = centre[0] - k0, centre[1] - k1, centre[2] - k2
     d2 = z0 * z0 + z1 * z1 + z2 * z2
     if d2 <= 1.0001 * r2 or cell_rad <= 0.0:  # the camera inside the model's sphere: no image of it
         return hidden
