@@ -24,6 +24,7 @@ import numpy as np
 import trimesh
 
 from ..errors import DatabaseError
+from .mesh_orientation import orient_outward
 
 __all__ = [
     "MESH_FORMATS",
@@ -224,4 +225,5 @@ def load_mesh(path: Path, unit: str | None, where: str) -> tuple[trimesh.Trimesh
     mesh = trimesh.Trimesh(vertices * scale, np.asarray(mesh.faces), process=False)
     mesh.merge_vertices()  # STL repeats each triangle's corners: merged, in metres, so m and mm files agree
     mesh.remove_unreferenced_vertices()
+    mesh, _ = orient_outward(mesh)  # face normals orient the visibility term's model points
     return mesh, unit_text, number_m
