@@ -74,8 +74,8 @@ LIMITS: dict[str, Limit] = {
     "vehicle.scanner.max_range_m": _veh(1e-3, 1e3, "m", "scanner maximum range (> minimum range)", _MM),
     "vehicle.scanner.fov_rad": _veh(1e-3, _PI, "rad", "scanner field of view (full cone)", _DEG),
     "vehicle.scanner.rate_hz": _veh(1e-3, 1e3, "Hz", "scanner sweep rate"),
-    "vehicle.scanner.camera_xyz_m": _veh(-2.0, 2.0, "m", "triangulation camera from the laser, per axis (scanner frame)",
-                                         _MM),
+    "vehicle.scanner.camera_xyz_m": _veh(-2.0, 2.0, "m", "triangulation camera from the laser, per axis "
+                                         "(scanner frame)", _MM),
     # -- vehicle description: DVL ----------------------------------------------------------------------
     "vehicle.dvl.noise_abs_mps": _veh(1e-4, 1.0, "m/s", "DVL white noise, absolute part (> 0: a noiseless DVL "
                                       "makes the filter overconfident)"),

@@ -148,20 +148,18 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
                     occluder_min, camera):
     """Share of the model points predicted visible that contradict the scan, per hypothesis (H,).
 
-    A model point (object frame) is mapped into the scanner frame by the inverse hypothesis; it is
-    predicted visible when its normal faces the viewpoint. Its ray is projected on the cluster's range
-    image (gnomonic, rows of ``F`` = image axes, z = mean ray; cell ``1 / inv_cell_uv``; ``range_min``
-    (nu, nv) = smallest observed range around each cell, inf where nothing was observed). It contradicts
-    the scan when its cell saw nothing (it should have been seen) or when it lies more than ``tol_m``
-    in front of the observed surface (free space). With ``unseen_bad`` False (an image of the whole scene, not of
-    the cluster alone) a cell that saw nothing, or a point outside the image, is unknown: the point is not
-    counted at all (the scanner did not look there); a point more than ``tol_m`` behind the observed surface is
-    hidden if an object (``occluder_min``, same grid: the smallest range of the scene's objects, not its planes) is
-    in front of it, and contradicts the scan if only a plane is (the object would be inside the floor).
-
-    With a ``camera`` (3,) (the camera of a triangulation laser scanner, same frame as ``viewpoint``; NaN: none), a
-    point is measured only where the camera sees the laser's spot too: a model point facing away from the camera,
-    or hidden from it by the model itself (:func:`_camera_hidden`), is not predicted visible (not counted).
+    A model point (object frame) is mapped into the scanner frame by the inverse hypothesis; it is predicted visible
+    when its normal faces the viewpoint. Its ray is projected on the cluster's range image (gnomonic, rows of ``F`` =
+    image axes, z = mean ray; cell ``1 / inv_cell_uv``; ``range_min`` (nu, nv) = smallest observed range around each
+    cell, inf where nothing was observed). It contradicts the scan when its cell saw nothing (it should have been
+    seen) or when it lies more than ``tol_m`` in front of the observed surface (free space). With ``unseen_bad``
+    False (an image of the whole scene, not of the cluster alone) a cell that saw nothing, or a point outside the
+    image, is unknown: the point is not counted at all (the scanner did not look there); a point more than ``tol_m``
+    behind the observed surface is hidden if an object (``occluder_min``, same grid: the smallest range of the
+    scene's objects, not its planes) is in front of it, and contradicts the scan if only a plane is (the object
+    would be inside the floor). With a ``camera`` (3,) (a triangulation laser's camera, frame of ``viewpoint``;
+    NaN: none) a model point facing away from it or hidden from it by the model (:func:`_camera_hidden`) is not
+    predicted visible.
 
     Computed in the object frame: with ``c = t + R viewpoint`` (the scanner in the object frame) the ray is
     ``r = R^T (p_o - c)``, so the facing test is ``n_o . (p_o - c) < 0``, the range ``|p_o - c|`` and the
@@ -170,6 +168,7 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     H, M = Rs.shape[0], model_pts.shape[0]
     nu, nv = range_min.shape[0], range_min.shape[1]
     out = np.empty(H)
+    no_camera = np.zeros(M if np.isnan(camera).any() else 0, dtype=np.bool_)  # then hidden nowhere (read only)
     for h in prange(H):
         R = Rs[h]
         c0 = ts[h, 0] + R[0, 0] * viewpoint[0] + R[0, 1] * viewpoint[1] + R[0, 2] * viewpoint[2]
@@ -185,7 +184,7 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
         g20 = F[2, 0] * R[0, 0] + F[2, 1] * R[0, 1] + F[2, 2] * R[0, 2]
         g21 = F[2, 0] * R[1, 0] + F[2, 1] * R[1, 1] + F[2, 2] * R[1, 2]
         g22 = F[2, 0] * R[2, 0] + F[2, 1] * R[2, 1] + F[2, 2] * R[2, 2]
-        hidden = _camera_hidden(R, ts[h], model_pts, model_nrm, camera, 1.0 / inv_cell_uv, tol_m)
+        hidden = _camera_hidden(R, ts[h], model_pts, model_nrm, camera, 1.0 / inv_cell_uv, tol_m, no_camera)
         n_front = 0
         n_bad = 0
         for m in range(M):
@@ -227,17 +226,17 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
 
 
 @njit(cache=True, nogil=True)
-def _camera_hidden(R, t, model_pts, model_nrm, camera, cell_rad, tol_m):
-    """Per model point (M,): True where the camera (scanner frame; NaN: none, every point False) cannot see it under
-    the hypothesis ``(R, t)`` (object <- scanner): it faces away from the camera, or another model point lies in
-    front of it along the camera's ray. The model is splatted into a z-buffer about the camera's ray to the model's
-    centre (gnomonic, angular cell ``cell_rad``: the range image's); a point is hidden when the smallest camera range
-    over its 3 x 3 cells is nearer than its own by more than ``tol_m`` plus two cell footprints (a steep surface
-    does not hide itself)."""
+def _camera_hidden(R, t, model_pts, model_nrm, camera, cell_rad, tol_m, no_camera):
+    """Per model point (M,): True where the camera (scanner frame; NaN: none, and ``no_camera``, the caller's
+    all-False array of M, is returned) cannot see it under the hypothesis ``(R, t)`` (object <- scanner): it faces
+    away from the camera, or another model point lies in front of it along the camera's ray. The model is splatted
+    into a z-buffer about the camera's ray to the model's centre (gnomonic, angular cell ``cell_rad``: the range
+    image's); a point is hidden when the smallest camera range over its 3 x 3 cells is nearer than its own by more
+    than ``tol_m`` plus two cell footprints (a steep surface does not hide itself)."""
     M = model_pts.shape[0]
+    if len(no_camera) == M:  # no camera (or no model point)
+        return no_camera
     hidden = np.zeros(M, dtype=np.bool_)
-    if not (np.isfinite(camera[0]) and np.isfinite(camera[1]) and np.isfinite(camera[2])) or M == 0:
-        return hidden
     k0 = t[0] + R[0, 0] * camera[0] + R[0, 1] * camera[1] + R[0, 2] * camera[2]  # the camera in the object frame
     k1 = t[1] + R[1, 0] * camera[0] + R[1, 1] * camera[1] + R[1, 2] * camera[2]
     k2 = t[2] + R[2, 0] * camera[0] + R[2, 1] * camera[1] + R[2, 2] * camera[2]

@@ -19,6 +19,7 @@ from . import _search_kernels as K
 
 _NO_CAMERA = np.full(3, np.nan)
 
+
 @dataclass(frozen=True, eq=False)
 class DistanceField:
     """Nearest model point per grid cell (object frame), compact: ``offsets (nx, ny, nz, 3)`` int8 = nearest
