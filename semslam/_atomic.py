@@ -9,6 +9,8 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterator
 
+from ._signals import raise_if_interrupted
+
 
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "wb", **kwargs) -> Iterator[IO]:
@@ -22,6 +24,7 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb", **kwargs) -> Iterator
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
+        raise_if_interrupted()  # a Ctrl-C a library swallowed: no result is published (semslam._signals)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

@@ -27,7 +27,8 @@ of a semslam output (``cp -r``) carries the marker and is semslam's too.
 
 **Staging.** :func:`staged_output_dir` and :func:`staged_output_file` write into a fresh hidden sibling named
 ``.NAME.semslam-<pid>-<random>.tmp`` (made by :func:`tempfile.mkdtemp`: unique to the process and the call) and
-rename it over the target at the end, so an interrupted write leaves the previous output intact. Clean-up removes
+rename it over the target at the end, so an interrupted write leaves the previous output intact. Nothing is swapped
+in after the command received a Ctrl-C, even one a library swallowed (:func:`semslam._signals.raise_if_interrupted`). Clean-up removes
 only the staging folders the call itself created: never another sibling, whatever its name (a killed process's
 staging folder stays until you remove it).
 """
@@ -45,6 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator
 
+from ._signals import raise_if_interrupted
 from .errors import InputError
 
 MARKER = ".semslam-run"
@@ -198,6 +200,7 @@ def staged_output_dir(path: str | os.PathLike, *, overwrite: bool = False, kind:
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
         (tmp / MARKER).write_text(marker_text(kind), encoding="utf-8")
+        raise_if_interrupted()
         check_output_dir(out, overwrite=overwrite, option=option, kind=kind, replaces=replaces, inputs=inputs)
         if out.exists():
             trash = staging_dir(out, "old")
@@ -229,6 +232,7 @@ def staged_output_file(path: str | os.PathLike, *, overwrite: bool = False, opti
         staged = tmp / out.name
         if not staged.is_file():
             raise InputError(f"Nothing was written for the {option!r} file {str(out)!r}.")
+        raise_if_interrupted()
         check_output_file(out, overwrite=overwrite, option=option, inputs=inputs)
         os.replace(staged, out)
     finally:

@@ -26,6 +26,7 @@ from typing import Sequence
 
 from .. import __version__
 from ..errors import SemslamError
+from .._signals import defer_interrupt, interrupt_seen, note_interrupt
 
 
 def _command_modules() -> list[str]:
@@ -110,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         # after a Ctrl-C, whatever the interrupt left behind: wrapped by a compiled kernel (numba: a SystemError
         # from it) or a library module half-imported (a NameError in its __init__ later)
-        if _from_interrupt(exc) or _SIGINT_SEEN[0]:
+        if _from_interrupt(exc) or interrupt_seen():
             return _interrupted()
         raise
     finally:
@@ -118,8 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             gc.enable()
 
 
-#: whether the command (:func:`console`, its SIGINT handler) received a Ctrl-C, and whether it was reported
-_SIGINT_SEEN = [False]
+#: whether the interrupt was reported (whether one was received: semslam._signals.interrupt_seen)
 _REPORTED = [False]
 
 
@@ -132,9 +132,7 @@ def _interrupted() -> int:
 
 
 def _on_sigint(signum, frame) -> None:
-    _SIGINT_SEEN[0] = True
-    from .._signals import defer_interrupt
-
+    note_interrupt()  # recorded even if a library swallows the exception: no output is committed after it
     if defer_interrupt():  # loading native code (semslam._signals): raised when that section ends
         return
     raise KeyboardInterrupt
@@ -172,7 +170,7 @@ def console() -> None:
     except KeyboardInterrupt:  # between main's own handlers (e.g. in its finally clause)
         code = _interrupted()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if _SIGINT_SEEN[0]:  # a Ctrl-C some library swallowed: its work is not trusted, the run says so
+    if interrupt_seen():  # a Ctrl-C some library swallowed: its work was not committed, the run says so
         code = _interrupted()
     if code == 130:
         # Interrupted: leave now. CPython remembers a KeyboardInterrupt raised inside code it ran for a library

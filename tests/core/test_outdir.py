@@ -168,3 +168,52 @@ def test_claim_output_dir_marks_a_new_folder_and_refuses_a_foreign_one(tmp_path)
     with pytest.raises(InputError, match="remove it yourself"):
         claim_output_dir(foreign, kind="batch")
     assert sorted(p.name for p in foreign.iterdir()) == ["summary.csv"]
+
+
+def test_nothing_is_committed_after_a_ctrl_c_a_library_swallowed(tmp_path):
+    """A real SIGINT through the command's handler, raised inside a finaliser (Python reports it as unraisable and
+    goes on, as in a CI run whose interrupted `simulate` wrote its whole mission): the outputs staged after it are
+    not swapped in, the earlier ones stay, no staging folder is left."""
+    import gc
+    import signal
+    import sys
+
+    from semslam._atomic import atomic_write_text
+    from semslam._signals import forget_interrupts, interrupt_seen
+    from semslam.cli import main as cli_main
+
+    run, f, t = tmp_path / "run", tmp_path / "det.jsonl", tmp_path / "map.txt"
+    with staged_output_dir(run) as tmp:
+        (tmp / "a.txt").write_text("earlier")
+    f.write_text("earlier")
+    t.write_text("earlier")
+
+    class Swallower:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(1000):  # the handler runs here: its KeyboardInterrupt is lost with the finaliser
+                pass
+
+    old, old_hook = signal.signal(signal.SIGINT, cli_main._on_sigint), sys.unraisablehook
+    sys.unraisablehook = lambda u: None
+    try:
+        Swallower()
+        gc.collect()
+        assert interrupt_seen()
+        with pytest.raises(KeyboardInterrupt):
+            with staged_output_dir(run, overwrite=True) as tmp:
+                (tmp / "a.txt").write_text("after the Ctrl-C")
+        with pytest.raises(KeyboardInterrupt):
+            with staged_output_file(f, overwrite=True) as tmp:
+                tmp.write_text("after the Ctrl-C")
+        with pytest.raises(KeyboardInterrupt):
+            atomic_write_text(t, "after the Ctrl-C")
+    finally:
+        signal.signal(signal.SIGINT, old)
+        sys.unraisablehook = old_hook
+        forget_interrupts()
+    assert (run / "a.txt").read_text() == f.read_text() == t.read_text() == "earlier"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["det.jsonl", "map.txt", "run"]
+    with staged_output_file(f, overwrite=True) as tmp:  # once forgotten (a caller's next command): committed
+        tmp.write_text("next")
+    assert f.read_text() == "next"

@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from semslam._signals import critical, defer_interrupt
+from semslam._signals import critical, defer_interrupt, forget_interrupts
 
 
 def test_outside_a_section_nothing_is_deferred():
@@ -49,7 +49,7 @@ def test_the_commands_sigint_handler_lets_a_section_finish_then_raises():
                 pass
     finally:
         signal.signal(signal.SIGINT, old)
-        cli_main._SIGINT_SEEN[0] = False
+        forget_interrupts()
 
 
 def test_a_section_in_another_thread_defers_nothing():

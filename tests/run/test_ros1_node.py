@@ -251,6 +251,30 @@ def test_semslam_ros_without_a_roscore_says_so_in_one_line(dive, tmp_path, monke
     assert not (tmp_path / "run").exists()
 
 
+def test_semslam_ros_stopped_with_ctrl_c_writes_its_run_and_exits_0(dive, tmp_path):
+    """The user's command, `semslam ros` (its console entry point and SIGINT handler), on a real roscore, stopped
+    with Ctrl-C after 8 s of the dive: the stop is the node's normal end, not an interrupt: exit 0, the summary
+    line, the run directory complete (the command's handler, chained by rospy's, must not count it)."""
+    run = tmp_path / "run"
+    with roscore(tmp_path) as env:
+        uri = env["ROS_MASTER_URI"]
+        cmd = [sys.executable, "-m", "semslam.cli.main", "ros", "--db", str(dive["db"]), "--topics",
+               str(dive["topics"]), "--vehicle", str(dive["vehicle"]), "--out", str(run), "--scan-queue", "all"]
+        with started(cmd, env, tmp_path / "ros.log") as node:
+            _wait(lambda: _node_up(uri, "/semslam") and _subscribed(uri, "/semslam/scans"), 60, "semslam ros",
+                  tmp_path / "ros.log")
+            play = subprocess.run(["rosbag", "play", "-q", "-u", "8", str(dive["bag"])], env=env,
+                                  capture_output=True, text=True, timeout=120)
+            assert play.returncode == 0, play.stderr
+            stop(node, timeout=60.0)
+        log = (tmp_path / "ros.log").read_text(errors="replace")
+        assert node.returncode == 0, log[-3000:]
+    assert "semslam: interrupted" not in log and "run written to" in log, log[-3000:]
+    doc = json.loads((run / "run.json").read_text())
+    assert doc["format"] == "semslam-run" and doc["verdict"] in ("ok", "warning")
+    assert len((run / "slam" / "pose" / "trajectory.csv").read_text().splitlines()) > 10
+
+
 
 @pytest.fixture(scope="module")
 def dive_with_gps(tmp_path_factory):

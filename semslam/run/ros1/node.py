@@ -25,6 +25,7 @@ by :func:`semslam.run.dive.write_outcome`, the same layout as ``semslam run``.
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 from dataclasses import dataclass, field
@@ -212,6 +213,12 @@ def _forward_to_node(box: dict) -> dict:
 def _open_node(rospy, live: LiveSlam, decoder: LiveDecoder, node_name: str, **topics_kw) -> NodeTopics:
     """``rospy.init_node`` (signals handled by rospy only on the main thread), then the node's topics."""
     main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        # rospy's SIGINT handler shuts the node down (its normal end: the run is then written) and calls the handler
+        # it replaced. That one must not take the Ctrl-C for an interrupt of the work: the `semslam` command's own
+        # handler would refuse to commit the run directory (semslam._signals). Python's default raises a
+        # KeyboardInterrupt, which rospy filters out.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     rospy.init_node(node_name, anonymous=False, disable_signals=not main_thread)
     return NodeTopics(rospy, live, decoder, **topics_kw)
 
