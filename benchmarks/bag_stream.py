@@ -70,7 +70,7 @@ def main() -> None:
     dive_s = one.duration_s * loops
     load = "%.2f %.2f %.2f" % os.getloadavg()
     print(f"machine speed: a fixed numpy + Python loop took {speed:.2f} s before the run and {machine_speed_s():.2f} s "
-          "after (1.1-1.4 s on this machine's fast days; this shared VM's speed varies by up to 2x within an hour)")
+          "after (0.72-1.50 s seen on this shared VM, whose speed varies by up to 2x; RESULTS.md gives it per run)")
     print(f"| dive (min) | scans | points | bag (MB, {made['format']}) | simulate + write bag (s) | semslam run (s) | "
           "real time | peak RSS (MB) | load after |")
     print("|---|---|---|---|---|---|---|---|---|")
