@@ -101,6 +101,13 @@ class PipelineConfig:
         accepts 35 % -> 0 %, precision 47 % -> 99 % on the missions it was tuned on (held out: 40 % -> 5 %,
         37 % -> 82 %). The visibility cost counts occluded parts of the object as contradictions, so partly
         hidden objects are rejected too (benchmarks/RESULTS.md). Needs ``estimate_pose``.
+    verify_max_plane_penetration_m : float or None
+        Hypothesis verification against the planes the segmentation removed (the seabed, a wall): a recognised
+        cluster lying on one (its nearest point within 5 cm of it) whose posed class reaches more than this behind
+        it is rejected (``extras["plane_penetration_m"]``): the object would be inside the floor. A flat plate taken
+        for a thicker flange, top face on top face, sinks the flange by the difference (11-12.5 mm on
+        ``benchmarks/real_models.py`` seed 0, every right pose within 2.1 mm). Off (None) by default; the
+        ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs ``estimate_pose``.
     verify_visibility_image : {"cluster", "scene", "border"}
         What verification's visibility cost compares the model with: the cluster alone (default: every model
         point the cluster did not see is a contradiction, so an object hidden in part or cut by the scan's edge
@@ -147,6 +154,7 @@ class PipelineConfig:
     up_scanner: tuple | None = None
     verify_min_fitness: float | None = None
     verify_max_visibility: float | None = None
+    verify_max_plane_penetration_m: float | None = None
     verify_visibility_image: str = "cluster"
     parts: PartsConfig | None = None
     attached: AttachedConfig | None = None
@@ -168,8 +176,13 @@ class PipelineConfig:
                                  f"Got {self.verify_min_fitness!r} instead.")
         if self.verify_max_visibility is not None:
             check_positive("verify_max_visibility", self.verify_max_visibility, caller=c, allow_zero=True)
-        if not self.estimate_pose and (self.verify_min_fitness is not None or self.verify_max_visibility is not None):
-            raise InputError(f"The 'verify_min_fitness' / 'verify_max_visibility' arguments of {c} need "
+        if self.verify_max_plane_penetration_m is not None:
+            check_positive("verify_max_plane_penetration_m", self.verify_max_plane_penetration_m, caller=c,
+                           allow_zero=True)
+        if not self.estimate_pose and any(v is not None for v in (self.verify_min_fitness, self.verify_max_visibility,
+                                                                   self.verify_max_plane_penetration_m)):
+            raise InputError(f"The 'verify_min_fitness' / 'verify_max_visibility' / 'verify_max_plane_penetration_m' "
+                             f"arguments of {c} need "
                              f"estimate_pose=True (they test the estimated pose). Got estimate_pose=False instead.")
         if self.parts is not None and (not isinstance(self.parts, PartsConfig) or self.verify_min_fitness is None):
             raise InputError(f"The 'parts' argument of {c} must be a PartsConfig, with verify_min_fitness set (a union "

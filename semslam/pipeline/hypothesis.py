@@ -20,7 +20,8 @@ from ..pose.estimate import estimate_object_pose
 from ..segmentation.scene import SegmentationResult
 from .scan_records import ScanContext
 
-__all__ = ["Hypothesis", "pose_and_verify", "pose_hypothesis", "scene_visibility", "verification_failure"]
+__all__ = ["Hypothesis", "plane_penetration_m", "pose_and_verify", "pose_hypothesis", "scene_visibility",
+           "verification_failure"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,12 +51,18 @@ class Hypothesis:
     touches_border: bool = False
 
 
-def verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None) -> str:
+def verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None,
+                         max_penetration_m: float | None = None) -> str:
     """Why a detection fails hypothesis verification (``PipelineConfig.verify_min_fitness`` /
-    ``verify_max_visibility``), or ``""`` when it passes (or verification is off). The visibility cost is tested
-    only when the pose search measured it (grid search; NaN otherwise)."""
+    ``verify_max_visibility`` / ``verify_max_plane_penetration_m``), or ``""`` when it passes (or verification is
+    off). The visibility cost is tested only when the pose search measured it (grid search; NaN otherwise), the
+    penetration only when a removed plane lies under the cluster (``extras["plane_penetration_m"]``)."""
     if min_fitness is not None and not det.fitness >= min_fitness:
         return f"pose verification: fitness {det.fitness:.3f} < {min_fitness:g}"
+    depth = float(det.extras.get("plane_penetration_m", float("nan")))
+    if max_penetration_m is not None and depth == depth and depth > max_penetration_m:
+        return (f"pose verification: the posed object reaches {1e3 * depth:.1f} mm behind a removed plane "
+                f"(> {1e3 * max_penetration_m:g} mm: inside the floor or the wall it lies on)")
     scene = "pose_visibility_scene" in det.extras
     vis = float(det.extras.get("pose_visibility_scene" if scene else "pose_visibility", float("nan")))
     if max_visibility is not None and vis == vis and vis > max_visibility:
@@ -84,6 +91,36 @@ def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult
     T_os = np.linalg.inv(T_scanner_object.matrix)
     return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
                                        model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])
+
+
+#: A removed plane is the one a cluster lies on when the cluster's nearest point is at most this far in front of it.
+SUPPORT_PLANE_DISTANCE_M = 0.05
+
+
+def plane_penetration_m(seg: SegmentationResult | None, cluster_points: np.ndarray, model_points_object: np.ndarray,
+                        T_scanner_object: np.ndarray) -> float:
+    """How far the posed model reaches behind the removed planes the cluster lies on (metres, >= 0), NaN when no
+    removed plane is within :data:`SUPPORT_PLANE_DISTANCE_M` of the cluster (or no segmentation).
+
+    A removed plane (the seabed, a wall; :attr:`SegmentationResult.planes`, ``n . p + d = 0`` with the scanner on
+    the positive side) is solid where the scanner saw it: an object lying on it cannot reach behind it. A cluster
+    taken for a class whose surface sits higher than the one seen (a 12 mm plate fitted as a 22 mm flange, top
+    face on top face) puts that class's bottom inside the floor, by the difference. Frames: ``cluster_points``
+    (N, 3) and the planes in the scan's frame, ``model_points_object`` (M, 3) in the object's,
+    ``T_scanner_object`` (4, 4)."""
+    if seg is None or not seg.planes or not len(cluster_points) or not len(model_points_object):
+        return float("nan")
+    T = np.asarray(T_scanner_object, dtype=np.float64)
+    model = model_points_object @ T[:3, :3].T + T[:3, 3]
+    depth = float("nan")
+    for plane in seg.planes:
+        n, d = plane.coefficients[:3], float(plane.coefficients[3])
+        nearest = float(np.min(cluster_points @ n + d))
+        if not -SUPPORT_PLANE_DISTANCE_M <= nearest <= SUPPORT_PLANE_DISTANCE_M:
+            continue  # the cluster does not lie on this plane
+        behind = max(-float(np.min(model @ n + d)), 0.0)
+        depth = behind if depth != depth else max(depth, behind)
+    return depth
 
 
 def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,
@@ -120,6 +157,9 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     if cfg.verify_max_visibility is not None and (mode == "scene" or (mode == "border" and hyp.touches_border)):
         extras["pose_visibility_scene"] = scene_visibility(cfg.pose, scan, seg, points, model, pose.T_scanner_object)
     extras["pose_score_margin"] = float(pose.score_margin)
+    if cfg.verify_max_plane_penetration_m is not None:
+        extras["plane_penetration_m"] = plane_penetration_m(seg, points, model.points_object,
+                                                            pose.T_scanner_object.matrix)
     if ambiguous:
         # The cluster is well aligned but another, non-equivalent orientation fits almost as well (a
         # near-symmetric view): the position is trustworthy, the orientation is not. Say so in the
@@ -156,7 +196,8 @@ def pose_and_verify(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
         model = rec.pose_model(hyp.label, hyp.view_index)
         det.extras["pose_visibility_scene"] = scene_visibility(cfg.pose, ctx.scan, seg, points, model,
                                                                det.T_sensor_object)
-    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
+    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility,
+                                  cfg.verify_max_plane_penetration_m)
     if failed:
         logging.getLogger("semslam.pipeline").debug("%s: %s %s", what, hyp.label, failed)
         return None

@@ -111,7 +111,8 @@ def _recognize_cluster(rec: Any, ctx: ScanContext, seg: SegmentationResult, k: i
                               found.threshold, None, why, **common)
     hyp = Hypothesis(_input_indices(seg, k), cluster, label, view_index, found, bool(border))
     det = pose_hypothesis(rec, ctx, seg, hyp, seed=cluster_seed, timings=timings)
-    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility)
+    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility,
+                                  cfg.verify_max_plane_penetration_m)
     if failed:
         return ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, found.nearest_label, found.distance, found.threshold,
                               None, f"rejected: {failed}", **common)

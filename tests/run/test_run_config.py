@@ -61,13 +61,15 @@ def test_depth_camera_preset_is_the_readme_frame_recipe():
     assert sorted(PRESETS) == ["cluttered", "default", "depth-camera", "seabed"]
 
 
-def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
+def test_seabed_preset_is_cluttered_with_a_second_plane_upright_poses_and_no_object_in_the_floor():
     """objects resting on the seabed beside structure: the cluttered recipe, a wall or slope removed as a second
-    plane, the pose kept upright with the AHRS's gravity (docs/configuration.md)."""
+    plane, no posed object more than 10 mm behind the plane it lies on, the pose kept upright with the AHRS's
+    gravity (docs/configuration.md)."""
     seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
     p, c = seabed.pipeline_config(), cluttered.pipeline_config()
     assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
-    assert dataclasses.replace(p, segmentation=c.segmentation) == c
+    assert p.verify_max_plane_penetration_m == 0.01 and c.verify_max_plane_penetration_m is None
+    assert dataclasses.replace(p, segmentation=c.segmentation, verify_max_plane_penetration_m=None) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
