@@ -39,14 +39,15 @@ def test_default_preset_is_todays_defaults():
 
 
 def test_cluttered_preset_is_the_catalogue_benchmarks_best_setting():
-    """catalogue_border: the best-measured setting of benchmarks/catalogue.py (RESULTS.md); the preset and the
+    """catalogue_border_floor: the best-measured setting of benchmarks/catalogue.py (RESULTS.md); the preset and the
     benchmark's dict must not drift apart."""
-    want = PipelineConfig(**_catalogue_configs()["catalogue_border"])
+    want = PipelineConfig(**_catalogue_configs()["catalogue_border_floor"])
     got = load_run_config(preset="cluttered").pipeline_config()
     assert got == want
     assert got != PipelineConfig()
     assert (got.verify_min_fitness, got.verify_max_visibility, got.border, got.verify_visibility_image,
-            got.size_reference, got.parts) == (0.95, 0.15, "flag", "border", "principal", PartsConfig())
+            got.size_reference, got.parts, got.verify_max_plane_penetration_m) == (0.95, 0.15, "flag", "border",
+                                                                                   "principal", PartsConfig(), 0.01)
     assert load_run_config(preset="cluttered").slam_config() == SlamConfig()  # recognition only
 
 
@@ -61,15 +62,15 @@ def test_depth_camera_preset_is_the_readme_frame_recipe():
     assert sorted(PRESETS) == ["cluttered", "default", "depth-camera", "seabed"]
 
 
-def test_seabed_preset_is_cluttered_with_a_second_plane_upright_poses_and_no_object_in_the_floor():
-    """objects resting on the seabed beside structure: the cluttered recipe, a wall or slope removed as a second
-    plane, no posed object more than 10 mm behind the plane it lies on, the pose kept upright with the AHRS's
+def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
+    """objects resting on the seabed beside structure: the cluttered recipe (no posed object more than 10 mm behind
+    the plane it lies on included), a wall or slope removed as a second plane, the pose kept upright with the AHRS's
     gravity (docs/configuration.md)."""
     seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
     p, c = seabed.pipeline_config(), cluttered.pipeline_config()
     assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
-    assert p.verify_max_plane_penetration_m == 0.01 and c.verify_max_plane_penetration_m is None
-    assert dataclasses.replace(p, segmentation=c.segmentation, verify_max_plane_penetration_m=None) == c
+    assert c.verify_max_plane_penetration_m == 0.01
+    assert dataclasses.replace(p, segmentation=c.segmentation) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
@@ -198,7 +199,7 @@ def test_cli_run_with_the_cluttered_preset_writes_the_resolved_config(tmp_path, 
     capsys.readouterr()
     resolved = load_run_config(run / CONFIG_FILE)
     assert resolved.preset == "cluttered"
-    assert resolved.pipeline_config() == PipelineConfig(**{**_catalogue_configs()["catalogue_border"],
+    assert resolved.pipeline_config() == PipelineConfig(**{**_catalogue_configs()["catalogue_border_floor"],
                                                            "reject_margin": 5.0})
     assert resolved.run.modes == ("pose",) and resolved.run.seed == 2  # explicit options over the file
     # the recogniser ran with it: the pipeline settings recorded beside the detections are the same
