@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_choice, check_positive
+from .._validation import check_choice, check_int, check_positive
 from ..errors import InputError
 from ..pose.model import PoseConfig
 from ..segmentation.scene import SegmentationConfig
@@ -108,6 +108,14 @@ class PipelineConfig:
         for a thicker flange, top face on top face, sinks the flange by the difference (11-12.5 mm on
         ``benchmarks/real_models.py`` seed 0, every right pose within 2.1 mm). Off (None) by default; the
         ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs ``estimate_pose``.
+    verify_next_classes : int
+        A cluster whose class fails hypothesis verification is tried as the next-nearest classes (the nearest view
+        of each other class the rejection accepts and whose size test it passes, nearest first), up to this many;
+        the first whose pose verifies is the detection (its reason says which class failed first and why). A strip
+        of a 12 mm plate cut by the swath's border is nearer a thicker flange's face than the plate's: the
+        flange's pose, 15 mm inside the floor, fails, the plate's verifies. 0 (default): the nearest class only.
+        Needs a verification check (``verify_min_fitness``, ``verify_max_visibility`` or
+        ``verify_max_plane_penetration_m``).
     verify_visibility_image : {"cluster", "scene", "border"}
         What verification's visibility cost compares the model with: the cluster alone (default: every model
         point the cluster did not see is a contradiction, so an object hidden in part or cut by the scan's edge
@@ -155,6 +163,7 @@ class PipelineConfig:
     verify_min_fitness: float | None = None
     verify_max_visibility: float | None = None
     verify_max_plane_penetration_m: float | None = None
+    verify_next_classes: int = 0
     verify_visibility_image: str = "cluster"
     parts: PartsConfig | None = None
     attached: AttachedConfig | None = None
@@ -184,6 +193,12 @@ class PipelineConfig:
             raise InputError(f"The 'verify_min_fitness' / 'verify_max_visibility' / 'verify_max_plane_penetration_m' "
                              f"arguments of {c} need "
                              f"estimate_pose=True (they test the estimated pose). Got estimate_pose=False instead.")
+        check_int("verify_next_classes", self.verify_next_classes, caller=c, minimum=0)
+        if self.verify_next_classes and all(v is None for v in (self.verify_min_fitness, self.verify_max_visibility,
+                                                                 self.verify_max_plane_penetration_m)):
+            raise InputError(f"The 'verify_next_classes' argument of {c} needs a verification check "
+                             f"(verify_min_fitness, verify_max_visibility or verify_max_plane_penetration_m): it "
+                             f"tries the next classes when one fails. Got {self.verify_next_classes!r} with none.")
         if self.parts is not None and (not isinstance(self.parts, PartsConfig) or self.verify_min_fitness is None):
             raise InputError(f"The 'parts' argument of {c} must be a PartsConfig, with verify_min_fitness set (a union "
                              f"is kept only if its pose verifies). Got parts={self.parts!r}, "

@@ -3,7 +3,8 @@
 :func:`plausibility_rejection` (too big for any class, cut by the scan border), :func:`describe` (global
 descriptors), :func:`match` (nearest view, unknown rejection), :func:`size_rejection` (the size test of the
 class), the pose (:func:`~semslam.pipeline.hypothesis.pose_hypothesis`) and its verification
-(:func:`~semslam.pipeline.hypothesis.verification_failure`).
+(:func:`~semslam.pipeline.hypothesis.verification_failure`); a class that fails verification may give way to the
+next-nearest ones (:func:`next_classes`, ``verify_next_classes``).
 
 Each stage takes what it reads as arguments and returns what it makes; ``rec`` is the
 :class:`~semslam.pipeline.scan.ScanRecognizer` (its ``config``, ``db``, ``classify``, ``class_size_limit_m`` and
@@ -26,8 +27,8 @@ from ._scan_helpers import _input_indices, _scan_angular_extent, _valid_points
 from .hypothesis import Hypothesis, pose_hypothesis, verification_failure
 from .scan_records import ClusterOutcome, ScanContext
 
-__all__ = ["describe", "match", "plausibility_rejection", "recognize_clusters", "scan_footprint", "segment",
-           "size_rejection"]
+__all__ = ["describe", "match", "next_classes", "plausibility_rejection", "recognize_clusters", "scan_footprint",
+           "segment", "size_rejection"]
 
 
 def segment(ctx: ScanContext, config: Any) -> SegmentationResult:
@@ -110,17 +111,45 @@ def _recognize_cluster(rec: Any, ctx: ScanContext, seg: SegmentationResult, k: i
         return ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, found.nearest_label, found.distance,
                               found.threshold, None, why, **common)
     hyp = Hypothesis(_input_indices(seg, k), cluster, label, view_index, found, bool(border))
-    det = pose_hypothesis(rec, ctx, seg, hyp, seed=cluster_seed, timings=timings)
-    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility,
-                                  cfg.verify_max_plane_penetration_m)
+    det, failed = _pose_and_verify(rec, ctx, seg, hyp, cluster_seed, timings)
+    tried = []
+    if failed and cfg.verify_next_classes:
+        for alt in next_classes(rec, found, label, extent):
+            tried.append(f"{hyp.label}: {failed}")
+            hyp = Hypothesis(hyp.raw_idx, cluster, alt.label, alt.view_index, alt, bool(border))
+            det, failed = _pose_and_verify(rec, ctx, seg, hyp, cluster_seed, timings)
+            if not failed:
+                break
     if failed:
+        others = "".join(f"; then as {t}" for t in tried[1:] + [f"{hyp.label}: {failed}"]) if tried else ""
+        first = tried[0].split(": ", 1)[1] if tried else failed
         return ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, found.nearest_label, found.distance, found.threshold,
-                              None, f"rejected: {failed}", **common)
+                              None, f"rejected: {first}{others}", **common)
     reason = "detected" if det.reliable else "detected (unreliable pose)"
+    if tried:
+        reason += f", as the next class ({'; '.join(tried)})"
     if border:
         reason += ", touches the scan border"
-    return ClusterOutcome(k, cluster.n_points, label, found.nearest_label, found.distance, found.threshold, det,
-                          reason, **common)
+    return ClusterOutcome(k, cluster.n_points, hyp.label, found.nearest_label, hyp.match.distance,
+                          hyp.match.threshold, det, reason, **common)
+
+
+def _pose_and_verify(rec: Any, ctx: ScanContext, seg: SegmentationResult, hyp: Hypothesis, seed: int,
+                     timings: dict) -> tuple[Detection, str]:
+    """The detection of ``hyp`` and why it fails verification (``""``: it passes)."""
+    cfg = rec.config
+    det = pose_hypothesis(rec, ctx, seg, hyp, seed=seed, timings=timings)
+    return det, verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility,
+                                     cfg.verify_max_plane_penetration_m)
+
+
+def next_classes(rec: Any, found: Any, label: str, extent_m: np.ndarray) -> list[Any]:
+    """The classes a cluster is tried as when class ``label``'s pose fails verification
+    (``PipelineConfig.verify_next_classes``): the nearest views of the other classes the rejection accepts and
+    whose size test the cluster passes, nearest first, at most ``verify_next_classes`` of them."""
+    alts = [m for m in rec.recognizer.other_classes(found.descriptors, label)
+            if not size_rejection(rec, m.label, extent_m)]
+    return alts[:rec.config.verify_next_classes]
 
 
 def recognize_clusters(rec: Any, ctx: ScanContext, seg: SegmentationResult,

@@ -13,7 +13,7 @@ from .._validation import check_choice
 from ..cloud import PointCloud
 from ..errors import RecognitionError
 from .database import DESCRIPTORS, ViewDatabase, ViewDescriptors, combine_descriptors
-from .matching import Chi2NearestNeighbor
+from .matching import Chi2NearestNeighbor, chi2_distances
 from .rejection import UNKNOWN_LABEL
 
 __all__ = ["Match", "Recognizer"]
@@ -98,3 +98,23 @@ class Recognizer:
     def match(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> Match:
         """Describe ``cloud`` (any frame, viewpoint = sensor origin) as the database's views and match it."""
         return self.match_descriptors(self.db.describe(cloud, seed=seed))
+
+    def other_classes(self, descriptors: ViewDescriptors, exclude: str) -> list[Match]:
+        """The nearest view of every class but ``exclude`` that the rejection would accept, nearest first: the
+        classes a cluster could be when ``exclude``'s hypothesis fails verification
+        (``PipelineConfig.verify_next_classes``). Each is an accepted :class:`Match` of that class (its distance
+        within that class's threshold)."""
+        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
+        dist = chi2_distances(x, self.classifier.X_fit_)[0]
+        labels = np.asarray(self.db.labels).astype(str)
+        thr = self.classifier.rejection_
+        found = []
+        for label in np.unique(labels):
+            if label == exclude:
+                continue
+            rows = np.flatnonzero(labels == label)
+            i = int(rows[np.argmin(dist[rows])])
+            threshold = float("inf") if thr is None else thr.threshold_of(label)
+            if dist[i] <= threshold:
+                found.append(Match(str(label), i, str(label), float(dist[i]), threshold, descriptors))
+        return sorted(found, key=lambda m: (m.distance, m.view_index))
