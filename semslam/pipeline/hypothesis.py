@@ -148,7 +148,7 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     extras["pose_upright"] = up_object is not None
     pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=cfg.pose, seed=seed,
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object
-                                is not None else None, up_object=up_object)
+                                is not None else None, up_object=up_object, partial=bool(hyp.touches_border))
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

@@ -126,6 +126,7 @@ def estimate_object_pose(
     init_T_scanner_object: Any = None,
     up_scanner: Any = None,
     up_object: Any = None,
+    partial: bool = False,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -160,6 +161,9 @@ def estimate_object_pose(
         found upside down. ``up_object`` may be several directions (k, 3): a part that rests on either face;
         the orientations keeping any of them up are scanned, and a near-equal fit of another one makes the
         pose ambiguous.
+    partial : bool
+        The cluster is part of what the scanner could have seen (cut by the scan's border): the grid search also
+        starts the translation on a grid across the object (``PoseConfig.partial_start_step_m``; off at 0).
 
     Returns
     -------
@@ -180,7 +184,10 @@ def estimate_object_pose(
     sym = _checked_symmetry(symmetry)
     cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
     t1 = time.perf_counter()
-    alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object)
+    if not isinstance(partial, (bool, np.bool_)):
+        raise InputError(f"The 'partial' argument of {_CALLER} must be true or false. Got {partial!r} instead.")
+    alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
+                               bool(partial))
     return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
 
 
@@ -226,7 +233,7 @@ def _checked_cluster(
 
 
 def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
-                   init_T_scanner_object: Any, up_scanner: Any, up_object: Any) -> _Alignment:
+                   init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False) -> _Alignment:
     """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
     the grid search with ICP of its best hypotheses (the default)."""
     nan = float("nan")
@@ -253,7 +260,7 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
                              f"Got shape {np.shape(up_object)} instead.")
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
-    fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright)
+    fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial)
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 
 
@@ -281,7 +288,8 @@ def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Sy
     )
 
 
-def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None):
+def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None,
+                 partial: bool = False):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -301,7 +309,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m
-        else (), camera_offset_m=cfg.camera_offset_m)
+        else (), camera_offset_m=cfg.camera_offset_m, partial_step_m=cfg.partial_start_step_m if partial else 0.0)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m

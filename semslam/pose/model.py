@@ -56,6 +56,12 @@ class PoseConfig:
     #: models (benchmarks/history/real-models.md, session 15): recall +0.9 points held out, but the pose NEES
     #: 6.3 -> 21: the shadows explain the misses of the large wheel valve, and leave its half-turn undecided.
     camera_offset_m: tuple | None = None
+    #: Translation starts of a partial cluster (cut by the scan's border: ``estimate_object_pose(partial=True)``):
+    #: besides the centroid rules, a square grid of this spacing across the object's radius, perpendicular to the
+    #: view. A strip of a flange's rim has its centroid ~10 cm from where the whole view's centroid would be, beyond
+    #: the 3 cm that the translation steps pull in. 0 (default): the centroid rules only. 0.04 m found the shared
+    #: slip-on flange's border strips (fitness 0.62-0.88 -> 1.0, within 4 mm; benchmarks/history/real-models.md).
+    partial_start_step_m: float = 0.0
     #: Coarse-to-fine ranking: a grid of ``n_coarse_rotations`` is ranked first, and only the fine-grid
     #: children of its ``n_coarse_keep`` best orientations are ranked next (0 = rank the whole fine grid).
     #: 512 / 64 (was 1024 / 128: the same ~512 fine orientations ranked, half the coarse pass) with
@@ -141,7 +147,7 @@ class PoseConfig:
         for name in ("n_coarse_rotations", "n_coarse_keep"):
             check_int(name, getattr(self, name), caller=c, minimum=0)
         for name in ("model_icp_voxel_m", "icp_wide_correspondence_m", "visibility_weight", "back_facing_weight",
-                     "local_refine_min_radius_m",
+                     "local_refine_min_radius_m", "partial_start_step_m",
                      "min_score_margin",
                      "min_sigma_translation_m", "min_sigma_rotation_rad"):
             check_positive(name, getattr(self, name), caller=c, allow_zero=True)

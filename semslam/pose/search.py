@@ -115,7 +115,8 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
                       start_separation_m: float = 0.015, local_steps_rad: tuple = (),
-                      camera_offset_m: tuple | None = None) -> tuple[list[Hypothesis], RangeImage]:
+                      camera_offset_m: tuple | None = None,
+                      partial_step_m: float = 0.0) -> tuple[list[Hypothesis], RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of
     ``n_coarse_points`` of the points ranks all orientations; the ``n_candidates`` best are aligned and fitted
@@ -132,7 +133,9 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The
     visible-surface starts matter for parts whose origin (bounding-box
     centre) is far from their surface, e.g. an L-shaped valve (ring and lever): there the radius rule starts
-    ~10 cm off.
+    ~10 cm off. ``partial_step_m`` > 0 (a cluster cut by the scan's border) adds the starts of a square grid of that
+    spacing within ``object_radius_m`` of the first, perpendicular to the view: the part seen may lie anywhere on
+    the object.
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
     3 x 3 x 3 grid of rotations (+-step about each object axis, about the cluster's centroid) per step, with the
@@ -149,7 +152,7 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     coarse_truncations = np.asarray(truncations_m[:-2], dtype=np.float64)
 
     starts = _TranslationStarts(field, view, c, object_radius_m, view_centroids, start_separation_m,
-                                float(tau_m))
+                                float(tau_m), _partial_offsets(view, object_radius_m, partial_step_m))
     Rs = np.ascontiguousarray(rotations, dtype=np.float64)
     if hierarchy is not None and n_coarse_keep < len(hierarchy.coarse):
         Rc = np.ascontiguousarray(hierarchy.coarse, dtype=np.float64)
@@ -189,7 +192,8 @@ class _TranslationStarts:
     """The translation starts of an orientation in :func:`search_hypotheses`: the cluster's ``centroid`` mapped
     ``object_radius_m / 2`` from the object's origin towards the scanner (``view``: the unit direction from the
     centroid to the scanner, scanner frame) and, given ``view_centroids``, the centroids of the model surface seen
-    from the scanner where these are more than ``start_separation_m`` from the first."""
+    from the scanner where these are more than ``start_separation_m`` from the first; then the first shifted by
+    each of ``offsets`` (K, 3), scanner frame (a partial cluster: :func:`_partial_offsets`)."""
 
     field: DistanceField
     view: np.ndarray
@@ -198,6 +202,7 @@ class _TranslationStarts:
     view_centroids: "ViewCentroids | None"
     start_separation_m: float
     tau_m: float
+    offsets: np.ndarray
 
     def best_aligned(self, R: np.ndarray, src: np.ndarray, truncations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fit (H,) and translation (H, 3) of the best start of each orientation after translation steps."""
@@ -217,7 +222,28 @@ class _TranslationStarts:
             fit = K.align_and_score(Rf, t, src, field.params, field.cell_m, field.offsets, truncations, self.tau_m)
             better = fit < best_fit[far]
             best_fit[far[better]], best_t[far[better]] = fit[better], t[better]
+        first = radius - rc
+        for d in self.offsets:  # the cluster shifted by d in the scanner frame: t + R d
+            t = np.ascontiguousarray(first + (flat @ d).reshape(-1, 3))
+            fit = K.align_and_score(R, t, src, field.params, field.cell_m, field.offsets, truncations, self.tau_m)
+            better = fit < best_fit
+            best_fit[better], best_t[better] = fit[better], t[better]
         return best_fit, best_t
+
+
+def _partial_offsets(view: np.ndarray, radius_m: float, step_m: float) -> np.ndarray:
+    """The nonzero points (K, 3) of a square grid of spacing ``step_m`` within ``radius_m`` of the origin, in the
+    plane perpendicular to the unit ``view``; (0, 3) when ``step_m`` is 0."""
+    if not step_m > 0:
+        return np.zeros((0, 3))
+    a = np.cross(view, [1.0, 0.0, 0.0] if abs(view[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(view, a)
+    n = int(radius_m // step_m)
+    i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    keep = ((i != 0) | (j != 0)) & ((i * i + j * j) * step_m ** 2 <= radius_m ** 2)
+    return step_m * (i[keep, None] * a + j[keep, None] * b)
 
 
 @functools.lru_cache(maxsize=8)

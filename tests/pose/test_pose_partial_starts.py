@@ -1,0 +1,84 @@
+"""Translation starts of a partial cluster (``PoseConfig.partial_start_step_m``, ``estimate_object_pose(partial=)``):
+a flange-like part (a 32 cm ring with a raised hub) seen 20 degrees off its axis and cut by the scan's border so that
+only the rim beyond 6 cm of the axis and part of the hub remain: the cluster's centroid lies 10 cm from where the
+whole view's would be, beyond the 3 cm the search's translation steps pull in (the shared slip-on flange's border
+strips, benchmarks/history/real-models.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from semslam.errors import InputError
+from semslam.pose import PoseConfig, estimate_object_pose, prepare_pose_model
+from semslam.pose.search import _partial_offsets
+from semslam.simulation.scan_sim import mesh_model_cloud, scan_mesh
+from semslam.symmetry import Symmetry
+
+AXIS = Symmetry(kind="continuous", axis_object=np.array([0.0, 0.0, 1.0]))
+
+
+@pytest.fixture(scope="module")
+def flange():
+    """The part's model cloud, its true T_scanner_object, the cut cluster and the up direction in the scan."""
+    import trimesh
+
+    ring = trimesh.creation.annulus(r_min=0.05, r_max=0.16, height=0.03)
+    hub = trimesh.creation.annulus(r_min=0.05, r_max=0.08, height=0.04)
+    hub.apply_translation([0.0, 0.0, 0.035])
+    mesh = trimesh.util.concatenate([ring, hub])
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("y", 20.0, degrees=True).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [0.02, -0.03, 1.0]
+    pts = scan_mesh(mesh, T, n_target_points=4000, range_noise_m=0.001, seed=np.random.default_rng(3))
+    in_object = (pts - T[:3, 3]) @ T[:3, :3]
+    cut = pts[in_object[:, 0] > 0.06]
+    assert np.linalg.norm(in_object[in_object[:, 0] > 0.06].mean(axis=0)[:2]) > 0.09
+    return mesh_model_cloud(mesh, seed=1), T, cut, T[:3, :3] @ [0.0, 0.0, 1.0]
+
+
+def _estimate(flange, step_m, partial):
+    cloud, T, cut, up = flange
+    model = prepare_pose_model(cloud, PoseConfig(partial_start_step_m=step_m))
+    est = estimate_object_pose(cut, model, symmetry=AXIS, up_scanner=up, up_object=[0.0, 0.0, 1.0], partial=partial)
+    Te = est.T_scanner_object.matrix
+    return est, float(np.linalg.norm(Te[:3, 3] - T[:3, 3])), AXIS.rotation_error_rad(Te[:3, :3], T[:3, :3])
+
+
+def test_a_border_cut_rim_is_found_with_the_grid_of_starts_and_not_without(flange):
+    est, t_err, r_err = _estimate(flange, 0.04, True)
+    assert est.fitness > 0.99 and t_err < 0.003 and np.degrees(r_err) < 1.0
+    without, t_without, _ = _estimate(flange, 0.04, False)  # the same model, the cluster taken as whole
+    assert t_without > 0.02 and without.fitness < 0.95
+
+
+def test_the_grid_is_off_by_default_and_for_whole_clusters(flange):
+    """Catches the grid run where it was not asked for (a whole cluster, or the default configuration)."""
+    a = _estimate(flange, 0.0, True)[0].T_scanner_object.matrix
+    b = _estimate(flange, 0.0, False)[0].T_scanner_object.matrix
+    c = _estimate(flange, 0.04, False)[0].T_scanner_object.matrix
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(b, c)
+    assert PoseConfig().partial_start_step_m == 0.0
+
+
+def test_the_offsets_fill_the_disc_across_the_view_at_the_step():
+    view = np.array([0.3, -0.2, 0.93])
+    view /= np.linalg.norm(view)
+    d = _partial_offsets(view, 0.16, 0.04)
+    assert np.allclose(d @ view, 0.0, atol=1e-12)  # perpendicular to the view
+    r = np.linalg.norm(d, axis=1)
+    assert r.min() == pytest.approx(0.04) and r.max() <= 0.16 + 1e-12
+    assert len(d) == sum(1 for i in range(-4, 5) for j in range(-4, 5) if 0 < i * i + j * j <= 16)
+    nearest = np.sort(np.linalg.norm(d[:, None] - d[None], axis=2), axis=1)[:, 1]
+    assert np.allclose(nearest, 0.04)  # a square grid of that spacing
+    assert _partial_offsets(view, 0.16, 0.0).shape == (0, 3)
+
+
+def test_bad_settings_are_refused(flange):
+    with pytest.raises(InputError, match="partial_start_step_m"):
+        PoseConfig(partial_start_step_m=-0.01)
+    cloud, _, cut, up = flange
+    with pytest.raises(InputError, match="'partial'"):
+        estimate_object_pose(cut, prepare_pose_model(cloud), partial="yes")
