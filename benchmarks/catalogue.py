@@ -56,6 +56,7 @@ from semslam.pipeline import PipelineConfig, ScanRecognizer
 from semslam.pipeline.dataset_detection import detect_dataset
 from semslam.pipeline.parts import PartsConfig
 from semslam.recognition import build_database
+from semslam.run.config import load_run_config
 from semslam.simulation import ScannerConfig, SimulatorConfig, TrajectoryConfig, WorldConfig, simulate_dataset
 from semslam.simulation.cad_models import models_view_clouds, with_resting_up
 from semslam.simulation.catalogue import catalogue_objects
@@ -66,6 +67,8 @@ from semslam.simulation.occlusion import occlude_objects
 from semslam.segmentation import SegmentationConfig
 
 BG, UNK = "background", "unknown"
+
+_SEABED = load_run_config(preset="seabed").pipeline_config()
 
 #: The pipeline settings compared (keyword arguments of PipelineConfig); see the module docstring.
 CONFIGS = {
@@ -87,6 +90,9 @@ CONFIGS = {
                                     "size_reference": "principal", "parts": PartsConfig(),
                                     "verify_visibility_image": "border", "verify_max_plane_penetration_m": 0.01,
                                     "verify_next_classes": 1},
+    # the seabed preset's pipeline section as it is (semslam.run.config.PRESETS); its up_from_attitude is --upright
+    "seabed": {f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
+               if f.name not in ("descriptor", "classifier")},
     "catalogue_border_unionscene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                     "size_reference": "principal", "parts": PartsConfig(scene_visibility=True),
                                     "verify_visibility_image": "border"},
