@@ -114,3 +114,42 @@ def test_the_recogniser_measures_it_on_real_scans_of_objects_on_the_tank_floor(b
         assert all("plane_penetration_m" not in d.extras for d in off.recognize(cloud, seed=r.scan_id).detections)
     assert len(depths) >= 3
     assert all(0.0 <= v < 0.005 for v in depths), depths
+
+
+def _disc(radius_m: float, thickness_m: float, step=0.004) -> np.ndarray:
+    """Surface samples of a disc in its object frame, as ``_slab``: bottom face at z = 0, top at z = -thickness."""
+    faces = _grid(-radius_m, radius_m, -radius_m, radius_m, 0.0, step)
+    faces = faces[np.linalg.norm(faces[:, :2], axis=1) <= radius_m]
+    a = np.linspace(0.0, 2 * np.pi, int(2 * np.pi * radius_m / step), endpoint=False)
+    z = np.arange(-thickness_m, 0.0, step)
+    rim = np.column_stack([np.repeat(radius_m * np.cos(a), len(z)), np.repeat(radius_m * np.sin(a), len(z)),
+                           np.tile(z, len(a))])
+    return np.vstack([faces, faces - [0.0, 0.0, thickness_m], rim])
+
+
+def test_a_corner_clipping_a_second_removed_plane_beside_the_object_is_not_a_sinking():
+    """Catches the right pose rejected because a removed wall or slope's infinite plane clips its edge (the blind
+    flange at the foot of the tank's slope, benchmarks/real_models.py seed 3: 10.6-13.4 mm at its deepest point,
+    0.5 % of its points more than 5 mm deep), while a class sunk into the floor is still measured whole."""
+    from types import SimpleNamespace
+
+    from semslam.pipeline.hypothesis import PENETRATION_SHARE
+
+    disc = _disc(0.25, 0.022)
+    floor = SimpleNamespace(coefficients=np.array([0.0, 0.0, -1.0, FLOOR_Z]))
+    # a wall (normal along -x, towards the scanner's side of it) standing 11 mm inside the disc's edge at x = 0.25
+    wall = SimpleNamespace(coefficients=np.array([-1.0, 0.0, 0.0, 0.239]))
+    seg = SimpleNamespace(planes=[floor, wall])
+    top = _grid(-0.1, 0.1, -0.1, 0.1, FLOOR_Z - 0.022)  # the cluster: the disc's top face, within 5 cm of both
+    top[:, 0] += 0.135
+    pose = _pose(FLOOR_Z)
+    model = disc + pose[:3, 3]
+    deepest = -np.min(model @ wall.coefficients[:3] + wall.coefficients[3])
+    share = np.mean(model @ wall.coefficients[:3] + wall.coefficients[3] < 0.0)
+    assert deepest == pytest.approx(0.011, abs=5e-4) and 0.0 < share < PENETRATION_SHARE  # a corner, that deep
+    assert plane_penetration_m(seg, top, disc, pose) == pytest.approx(0.0, abs=1e-3)
+    # the first removed plane is the one the objects rest on: there the deepest point counts
+    first = SimpleNamespace(planes=[wall, floor])
+    assert plane_penetration_m(first, top, disc, pose) == pytest.approx(0.011, abs=5e-4)
+    sunk = _pose(FLOOR_Z + 0.010)  # the same disc 10 mm into the floor: its whole underside
+    assert plane_penetration_m(seg, top, disc, sunk) == pytest.approx(0.010, abs=1e-3)
