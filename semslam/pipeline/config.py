@@ -105,8 +105,8 @@ class PipelineConfig:
         Hypothesis verification against the planes the segmentation removed (the seabed, a wall): a recognised
         cluster lying on one (its nearest point within 5 cm of it) whose posed class reaches more than this behind
         it (behind a second plane, a slope or wall beside it, the depth its deepest 2 % of points reach: a corner
-        clipping that plane's infinite extension does not count) is rejected (``extras["plane_penetration_m"]``): the object would be inside the
-        floor. A flat plate taken
+        clipping that plane's infinite extension does not count) is rejected (``extras["plane_penetration_m"]``):
+        the object would be inside the floor. A flat plate taken
         for a thicker flange, top face on top face, sinks the flange by the difference (11-12.5 mm on
         ``benchmarks/real_models.py`` seed 0, every right pose within 2.1 mm). Off (None) by default; the
         ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs ``estimate_pose``.
