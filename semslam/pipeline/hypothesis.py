@@ -133,6 +133,24 @@ def plane_penetration_m(seg: SegmentationResult | None, cluster_points: np.ndarr
     return depth
 
 
+#: Beyond the cluster's own extent, how far about it the scan's other objects count as its surroundings (m); the
+#: reach is at least twice the model's radius (``PipelineConfig.pose_surroundings``).
+SURROUNDINGS_MARGIN_M = 0.05
+
+
+def surroundings(seg: SegmentationResult | None, points: np.ndarray, radius_m: float) -> np.ndarray | None:
+    """The points of the scan's clusters (the segmented cloud's objects, not its planes) within reach of ``points``
+    (a cluster, scanner frame): within ``max(cluster radius + SURROUNDINGS_MARGIN_M, 2 * radius_m)`` of its centroid
+    (``radius_m``: the posed class's). The cluster's own points are among them. None without a segmentation."""
+    if seg is None or not seg.cluster_indices or not len(points):
+        return None
+    cloud = seg.segmented_cloud.points_xyz_m
+    objects = cloud[np.concatenate(seg.cluster_indices)]
+    c = points.mean(axis=0)
+    reach = max(float(np.sqrt(np.max(np.sum((points - c) ** 2, axis=1)))) + SURROUNDINGS_MARGIN_M, 2.0 * radius_m)
+    return objects[np.sum((objects - c) ** 2, axis=1) <= reach * reach]
+
+
 def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,
                     timings: dict) -> Detection:
     """The detection of ``hyp``: its pose (unless ``estimate_pose`` is off), covariance and reliability, stamped
@@ -158,7 +176,9 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     extras["pose_upright"] = up_object is not None
     pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=cfg.pose, seed=seed,
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object
-                                is not None else None, up_object=up_object, partial=bool(hyp.touches_border))
+                                is not None else None, up_object=up_object, partial=bool(hyp.touches_border),
+                                surroundings_scanner=surroundings(seg, points, model.radius_m)
+                                if cfg.pose_surroundings else None)
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

@@ -127,6 +127,7 @@ def estimate_object_pose(
     up_scanner: Any = None,
     up_object: Any = None,
     partial: bool = False,
+    surroundings_scanner: Any = None,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -164,6 +165,9 @@ def estimate_object_pose(
     partial : bool
         The cluster is part of what the scanner could have seen (cut by the scan's border): the grid search also
         starts the translation on a grid across the object (``PoseConfig.partial_start_step_m``; off at 0).
+    surroundings_scanner : array-like (K, 3), optional
+        The scan's other objects about the cluster: seen surfaces for the grid search's visibility term (not for
+        the verdict's), ``PipelineConfig.pose_surroundings``: an object split in two is not posed to hide a part.
 
     Returns
     -------
@@ -184,11 +188,18 @@ def estimate_object_pose(
     sym = _checked_symmetry(symmetry)
     cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
     t1 = time.perf_counter()
+    alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
+                               *_checked_search_inputs(partial, surroundings_scanner))
+    return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
+
+
+def _checked_search_inputs(partial: Any, surroundings_scanner: Any) -> tuple[bool, np.ndarray | None]:
+    """``partial`` as a bool and ``surroundings_scanner`` as an (K, 3) array (or None), checked."""
     if not isinstance(partial, (bool, np.bool_)):
         raise InputError(f"The 'partial' argument of {_CALLER} must be true or false. Got {partial!r} instead.")
-    alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
-                               bool(partial))
-    return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
+    surroundings = None if surroundings_scanner is None else \
+        as_float_array("surroundings_scanner", surroundings_scanner, (None, 3), caller=_CALLER)
+    return bool(partial), surroundings
 
 
 @dataclass
@@ -233,7 +244,8 @@ def _checked_cluster(
 
 
 def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
-                   init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False) -> _Alignment:
+                   init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False,
+                   surroundings: np.ndarray | None = None) -> _Alignment:
     """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
     the grid search with ICP of its best hypotheses (the default)."""
     nan = float("nan")
@@ -260,7 +272,8 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
                              f"Got shape {np.shape(up_object)} instead.")
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
-    fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial)
+    fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial,
+                                                          surroundings)
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 
 
@@ -289,7 +302,7 @@ def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Sy
 
 
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None,
-                 partial: bool = False):
+                 partial: bool = False, surroundings: np.ndarray | None = None):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -309,7 +322,8 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m
-        else (), camera_offset_m=cfg.camera_offset_m, partial_step_m=cfg.partial_start_step_m if partial else 0.0)
+        else (), camera_offset_m=cfg.camera_offset_m, partial_step_m=cfg.partial_start_step_m if partial else 0.0,
+        surroundings=surroundings)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m
@@ -359,7 +373,21 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
               "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined],
               # for the covariance's hypothesis spread (popped by estimate_object_pose)
               "_alternatives": distinct}
-    return final, best[2], margin, extras, t2, nearest
+    # the verdict's visibility is the cluster's own: the surroundings choose between the hypotheses, they do not make
+    # a pose more trustworthy (a wrong pose overlapping the rest of the object would otherwise look clean)
+    vis = best[2] if surroundings is None or not len(surroundings) else _cluster_visibility(pts, vp, model, cfg,
+                                                                                             best[3], cluster)
+    return final, vis, margin, extras, t2, nearest
+
+
+def _cluster_visibility(pts: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,
+                        cluster: np.ndarray) -> float:
+    """The visibility cost of ``T_os`` (``T_object_scanner``) against the range image of the search points ``pts``
+    alone (the cluster, without its surroundings), as :func:`_final_scores` computes it."""
+    from .search_index import RangeImage
+
+    image = RangeImage.build(pts, vp, cell_m=cfg.image_cell_m).with_camera(cfg.camera_offset_m)
+    return _final_scores(cluster, image, model, cfg, [T_os])[0][1]
 
 
 def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os: np.ndarray, canonical_reference,

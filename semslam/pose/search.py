@@ -116,11 +116,11 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
                       start_separation_m: float = 0.015, local_steps_rad: tuple = (),
                       camera_offset_m: tuple | None = None,
-                      partial_step_m: float = 0.0) -> tuple[list[Hypothesis], RangeImage]:
+                      partial_step_m: float = 0.0,
+                      surroundings: np.ndarray | None = None) -> tuple[list[Hypothesis], RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
-    best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of
-    ``n_coarse_points`` of the points ranks all orientations; the ``n_candidates`` best are aligned and fitted
-    again with all the points and get the visibility term.
+    best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of ``n_coarse_points`` of
+    the points ranks all orientations; the ``n_candidates`` best are aligned, fitted with all, get the visibility.
 
     With a ``hierarchy`` over ``rotations``, the first ranking is coarse to fine: the coarse grid is ranked,
     and only the children of its ``n_coarse_keep`` best orientations are ranked in ``rotations``.
@@ -131,11 +131,12 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     scanner under the orientation, where these are more than ``start_separation_m`` from the first; each start
     is aligned by translation-only steps on the distance field (one per entry of ``truncations_m``, the first
     3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The
-    visible-surface starts matter for parts whose origin (bounding-box
-    centre) is far from their surface, e.g. an L-shaped valve (ring and lever): there the radius rule starts
-    ~10 cm off. ``partial_step_m`` > 0 (a cluster cut by the scan's border) adds the starts of a square grid of that
-    spacing within ``object_radius_m`` of the first, perpendicular to the view: the part seen may lie anywhere on
-    the object.
+    visible-surface starts matter for parts whose origin (bounding-box centre) is far from their surface, e.g. an
+    L-shaped valve (ring and lever): there the radius rule starts ~10 cm off. ``partial_step_m`` > 0 (a cluster
+    cut by the scan's border) adds the starts of a square grid of that spacing within ``object_radius_m`` of the
+    first, perpendicular to the view: the part seen may lie anywhere on the object. The visibility term's range
+    image is that of ``points``, with ``surroundings`` (K, 3: the scan's other objects about the cluster) entered
+    on its grid: a surface seen in a neighbouring cluster is no contradiction.
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
     3 x 3 x 3 grid of rotations (+-step about each object axis, about the cluster's centroid) per step, with the
@@ -166,7 +167,8 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                             np.asarray(truncations_m[-2:], dtype=np.float64), float(tau_m))
     # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
     cand = np.argsort(fit, kind="stable")[:n_candidates]
-    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m).with_camera(camera_offset_m)
+    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m,
+                             extra_points=surroundings).with_camera(camera_offset_m)
     vis = image.visibility_cost(Rs[cand], ts[cand], model_vis_pts, model_vis_nrm, visibility_tol_m)
     score = fit[cand] + visibility_weight * vis
     order = np.argsort(score, kind="stable")

@@ -104,7 +104,11 @@ class RangeImage:
 
     @classmethod
     def build(cls, points: np.ndarray, viewpoint: np.ndarray, *, cell_m: float, margin_m: float = 0.1,
-              dilate: int = 1) -> "RangeImage":
+              dilate: int = 1, extra_points: np.ndarray | None = None) -> "RangeImage":
+        """The range image of ``points`` (N, 3) seen from ``viewpoint``: gnomonic about their mean ray, cells of
+        ``cell_m`` at their median range, ``margin_m`` beyond them. ``extra_points`` (K, 3): further surfaces seen
+        (a cluster's surroundings) entered where they fall on that same grid, so that they can only remove
+        contradictions of :meth:`visibility_cost`, never move the grid."""
         rays = points - viewpoint
         rng = np.linalg.norm(rays, axis=1)
         z = rays.mean(axis=0)
@@ -125,6 +129,12 @@ class RangeImage:
         lo = uv.min(axis=0) - margin
         dims = np.ceil((uv.max(axis=0) + margin - lo) / cell).astype(int) + 1
         ij = np.floor((uv - lo) / cell).astype(np.int64)
+        if extra_points is not None and len(extra_points):
+            qe = (np.asarray(extra_points, dtype=np.float64) - viewpoint) @ F.T
+            qe = qe[qe[:, 2] > 1e-9]
+            ije = np.floor((qe[:, :2] / qe[:, 2:3] - lo) / cell).astype(np.int64)
+            inside = np.all(ije >= 0, axis=1) & np.all(ije < dims, axis=1)
+            ij, rng = np.vstack([ij, ije[inside]]), np.concatenate([rng, np.linalg.norm(qe[inside], axis=1)])
         # smallest range per cell, then over the (2 d + 1)^2 neighbourhood: tolerate sampling holes
         img = K.range_image(ij, rng, int(dims[0]), int(dims[1]), max(int(dilate), 0))
         return cls(np.asarray(viewpoint, dtype=np.float64), F, float(lo[0]), float(lo[1]), float(cell), img)
