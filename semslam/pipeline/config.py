@@ -84,7 +84,7 @@ class PipelineConfig:
         (``estimate_object_pose(surroundings_scanner=...)``): an object the segmentation split in two is not
         penalised for its part in the other cluster. A handwheel lying on the seabed, its rim broken at the spokes,
         was seen as half a wheel and posed half-turned with a confident covariance (``benchmarks/real_models.py``
-        seeds 0 and 3: the wheel valve's mean 6-DoF NEES 154 and 123, with this 2.8 and 4.7). Off by default; on in
+        seeds 0 and 3: the wheel valve's mean 6-DoF NEES 154 and 123, with this 4.1 and 4.7). Off by default; on in
         the ``seabed`` preset.
     estimate_pose : bool
         False stops after recognition (detections then carry an identity pose and an infinite-like covariance).
