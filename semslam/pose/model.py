@@ -58,11 +58,11 @@ class PoseConfig:
     camera_offset_m: tuple | None = None
     #: Translation starts of a partial cluster (cut by the scan's border: ``estimate_object_pose(partial=True)``):
     #: besides the centroid rules, a grid of this spacing across the object's radius, across the view (twice it
-    #: along the view) (:func:`.search.search_hypotheses`). A strip of a flange's rim has its centroid ~10 cm from where the
-    #: whole view's centroid would be, beyond the 3 cm that the translation steps pull in. 0 (default): the centroid
-    #: rules only. 0.04 m found the shared slip-on flange's border strips (fitness 0.62-0.88 -> 1.0, within 4 mm)
-    #: and, along the view, the valve panel front's (a ring on its rim, its lower arc ~10 cm behind the first
-    #: start; benchmarks/history/real-models.md).
+    #: along the view: :func:`.search._partial_offsets`). A strip of a flange's rim has its centroid ~10 cm from
+    #: where the whole view's centroid would be, beyond the 3 cm that the translation steps pull in. 0 (default):
+    #: the centroid rules only. 0.04 m found the shared slip-on flange's border strips (fitness 0.62-0.88 -> 1.0,
+    #: within 4 mm) and, along the view, the valve panel front's (a ring on its rim, its lower arc ~10 cm behind
+    #: the first start; benchmarks/history/real-models.md).
     partial_start_step_m: float = 0.0
     #: Coarse-to-fine ranking: a grid of ``n_coarse_rotations`` is ranked first, and only the fine-grid
     #: children of its ``n_coarse_keep`` best orientations are ranked next (0 = rank the whole fine grid).

@@ -139,12 +139,10 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The
     visible-surface starts matter for parts whose origin (bounding-box centre) is far from their surface, e.g. an
     L-shaped valve (ring and lever): there the radius rule starts ~10 cm off. ``partial_step_m`` > 0 (a cluster
-    cut by the scan's border) adds the starts of a grid of that spacing (twice it along the view) within
-    ``object_radius_m`` of the first: the part seen may lie anywhere on the object, across the view and along it (the lower arc of a ring
-    standing on its rim, seen from above, lies behind the ring's centre); a start off the first's depth replaces
-    the best one only when it fits better by :data:`PARTIAL_DEPTH_MARGIN`. The visibility term's range
-    image is that of ``points``, with ``surroundings`` (K, 3: the scan's other objects about the cluster) entered
-    on its grid: a surface seen in a neighbouring cluster is no contradiction.
+    cut by the scan's border) adds the starts of :func:`_partial_offsets` within ``object_radius_m`` of the first:
+    the part seen may lie anywhere on the object, across the view and along it; a start off the first's depth wins
+    only by :data:`PARTIAL_DEPTH_MARGIN`. The visibility term's range image is that of ``points``, with
+    ``surroundings`` (K, 3: the scan's other objects about the cluster) entered on its grid.
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
     3 x 3 x 3 grid of rotations (+-step about each object axis, about the cluster's centroid) per step, with the
