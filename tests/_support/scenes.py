@@ -29,3 +29,28 @@ def tank_scene(seed=0) -> tuple[PointCloud, list[int]]:
     return PointCloud(
         pts[order], intensity=labels[order].astype(float), frame_id="scanner"
     ), labels[order]
+
+
+def flange_mesh():
+    """A flange-like part: a 32 cm ring, 3 cm thick, with a raised hub (axis z), as a trimesh mesh (metres)."""
+    import trimesh
+
+    rim = trimesh.creation.annulus(r_min=0.05, r_max=0.16, height=0.03)
+    hub = trimesh.creation.annulus(r_min=0.05, r_max=0.08, height=0.04)
+    hub.apply_translation([0.0, 0.0, 0.035])
+    return trimesh.util.concatenate([rim, hub])
+
+
+def flange_view(tilt_deg: float):
+    """:func:`flange_mesh` seen ``tilt_deg`` off its axis from 1 m: the mesh, the true ``T_scanner_object``
+    (4, 4), the scan points (scanner frame, 1 mm range noise) and the same points in the object frame."""
+    from scipy.spatial.transform import Rotation
+
+    from semslam.simulation.scan_sim import scan_mesh
+
+    mesh = flange_mesh()
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [0.02, -0.03, 1.0]
+    pts = scan_mesh(mesh, T, n_target_points=4000, range_noise_m=0.001, seed=np.random.default_rng(3))
+    return mesh, T, pts, (pts - T[:3, 3]) @ T[:3, :3]

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from semslam.errors import InputError
 from semslam.pose import PoseConfig, estimate_object_pose, prepare_pose_model
 from semslam.pose.search import _partial_offsets
-from semslam.simulation.scan_sim import mesh_model_cloud, scan_mesh
+from semslam.simulation.scan_sim import mesh_model_cloud
 from semslam.symmetry import Symmetry
+from tests._support.scenes import flange_view
 
 AXIS = Symmetry(kind="continuous", axis_object=np.array([0.0, 0.0, 1.0]))
 
@@ -22,17 +22,7 @@ AXIS = Symmetry(kind="continuous", axis_object=np.array([0.0, 0.0, 1.0]))
 @pytest.fixture(scope="module")
 def flange():
     """The part's model cloud, its true T_scanner_object, the cut cluster and the up direction in the scan."""
-    import trimesh
-
-    ring = trimesh.creation.annulus(r_min=0.05, r_max=0.16, height=0.03)
-    hub = trimesh.creation.annulus(r_min=0.05, r_max=0.08, height=0.04)
-    hub.apply_translation([0.0, 0.0, 0.035])
-    mesh = trimesh.util.concatenate([ring, hub])
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("y", 20.0, degrees=True).as_matrix() @ np.diag([1.0, -1.0, -1.0])
-    T[:3, 3] = [0.02, -0.03, 1.0]
-    pts = scan_mesh(mesh, T, n_target_points=4000, range_noise_m=0.001, seed=np.random.default_rng(3))
-    in_object = (pts - T[:3, 3]) @ T[:3, :3]
+    mesh, T, pts, in_object = flange_view(20.0)
     cut = pts[in_object[:, 0] > 0.06]
     assert np.linalg.norm(in_object[in_object[:, 0] > 0.06].mean(axis=0)[:2]) > 0.09
     return mesh_model_cloud(mesh, seed=1), T, cut, T[:3, :3] @ [0.0, 0.0, 1.0]

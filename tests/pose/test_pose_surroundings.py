@@ -19,8 +19,9 @@ from semslam.errors import InputError
 from semslam.pipeline import PipelineConfig
 from semslam.pipeline.hypothesis import SURROUNDINGS_MARGIN_M, surroundings
 from semslam.pose import PoseConfig, estimate_object_pose, prepare_pose_model
-from semslam.simulation.scan_sim import mesh_model_cloud, scan_mesh
+from semslam.simulation.scan_sim import mesh_model_cloud
 from semslam.symmetry import Symmetry
+from tests._support.scenes import flange_mesh, flange_view
 
 AXIS = Symmetry(kind="continuous", axis_object=np.array([0.0, 0.0, 1.0]))
 #: the ring rests on either face: both ups are searched
@@ -29,22 +30,13 @@ UPS = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
 
 @pytest.fixture(scope="module")
 def ring():
-    import trimesh
-
-    rim = trimesh.creation.annulus(r_min=0.05, r_max=0.16, height=0.03)
-    hub = trimesh.creation.annulus(r_min=0.05, r_max=0.08, height=0.04)
-    hub.apply_translation([0.0, 0.0, 0.035])
-    mesh = trimesh.util.concatenate([rim, hub])
+    mesh = flange_mesh()
     return mesh, prepare_pose_model(mesh_model_cloud(mesh, seed=1), PoseConfig())
 
 
 def _split_view(mesh, tilt_deg):
     """The true T_scanner_object, the half-rim cluster, the rest of the view (the hub, the other half), up."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ np.diag([1.0, -1.0, -1.0])
-    T[:3, 3] = [0.02, -0.03, 1.0]
-    pts = scan_mesh(mesh, T, n_target_points=4000, range_noise_m=0.001, seed=np.random.default_rng(3))
-    o = (pts - T[:3, 3]) @ T[:3, :3]
+    _, T, pts, o = flange_view(tilt_deg)
     half = (o[:, 0] > 0.0) & (np.hypot(o[:, 0], o[:, 1]) > 0.085)
     return T, pts[half], pts[~half], T[:3, :3] @ [0.0, 0.0, 1.0]
 
