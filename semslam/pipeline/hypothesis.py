@@ -56,7 +56,9 @@ def verification_failure(det: Detection, min_fitness: float | None, max_visibili
     """Why a detection fails hypothesis verification (``PipelineConfig.verify_min_fitness`` /
     ``verify_max_visibility`` / ``verify_max_plane_penetration_m``), or ``""`` when it passes (or verification is
     off). The visibility cost is tested only when the pose search measured it (grid search; NaN otherwise), the
-    penetration only when a removed plane lies under the cluster (``extras["plane_penetration_m"]``)."""
+    penetration only when a removed plane lies under the cluster (``extras["plane_penetration_m"]``). The cluster's
+    own visibility cost is the lower of one viewpoint's and the scanner camera's (``extras["pose_visibility_camera"]``,
+    ``PipelineConfig.verify_camera_shadows``) when both were computed."""
     if min_fitness is not None and not det.fitness >= min_fitness:
         return f"pose verification: fitness {det.fitness:.3f} < {min_fitness:g}"
     depth = float(det.extras.get("plane_penetration_m", float("nan")))
@@ -65,6 +67,9 @@ def verification_failure(det: Detection, min_fitness: float | None, max_visibili
                 f"(> {1e3 * max_penetration_m:g} mm: inside the floor or the wall it lies on)")
     scene = "pose_visibility_scene" in det.extras
     vis = float(det.extras.get("pose_visibility_scene" if scene else "pose_visibility", float("nan")))
+    camera = float(det.extras.get("pose_visibility_camera", float("nan")))
+    if not scene and camera < vis:  # the camera's shadows explain what one viewpoint does not (NaN: not computed)
+        vis = camera
     if max_visibility is not None and vis == vis and vis > max_visibility:
         return f"pose verification: {'scene ' if scene else ''}visibility cost {vis:.3f} > {max_visibility:g}"
     return ""
@@ -91,6 +96,26 @@ def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult
     T_os = np.linalg.inv(T_scanner_object.matrix)
     return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
                                        model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])
+
+
+def camera_visibility(pose_config: Any, points: np.ndarray, viewpoint_xyz_m: np.ndarray, model: Any,
+                      T_scanner_object: Any, camera_xyz_m: Any) -> float:
+    """The visibility cost of a pose against the cluster's own range image (``points``, on the pose search's voxel
+    grid, as the search's verdict computes it) with the triangulation camera at ``camera_xyz_m`` (scanner frame):
+    model points the camera cannot see are not expected in the scan (``PipelineConfig.verify_camera_shadows``).
+    NaN when the model has no visibility points."""
+    from ..pose.search import RangeImage
+    from ..segmentation.voxel import voxel_downsample
+
+    if model.visibility_points is None or not len(model.visibility_points):
+        return float("nan")
+    pc = pose_config
+    grid = voxel_downsample(points, pc.search_voxel_m)
+    image = RangeImage.build(grid if len(grid) >= 3 else points, np.asarray(viewpoint_xyz_m, dtype=np.float64),
+                             cell_m=pc.image_cell_m).with_camera(camera_xyz_m)
+    T_os = np.linalg.inv(T_scanner_object.matrix)
+    return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
+                                       model.visibility_normals, pc.visibility_tol_m)[0])
 
 
 #: A removed plane is the one a cluster lies on when the cluster's nearest point is at most this far in front of it.
@@ -183,6 +208,10 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict
     extras["pose_visibility"] = float(pose.visibility)
+    camera = rec.db.scanner_camera_xyz_m if cfg.verify_camera_shadows else None
+    if camera is not None and np.isfinite(pose.visibility):
+        extras["pose_visibility_camera"] = camera_visibility(cfg.pose, points, scan.viewpoint_xyz_m, model,
+                                                             pose.T_scanner_object, camera)
     mode = cfg.verify_visibility_image
     if cfg.verify_max_visibility is not None and (mode == "scene" or (mode == "border" and hyp.touches_border)):
         extras["pose_visibility_scene"] = scene_visibility(cfg.pose, scan, seg, points, model, pose.T_scanner_object)

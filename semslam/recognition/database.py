@@ -201,6 +201,25 @@ class ViewDatabase:
             up = ((self.params.get("fusion") or {}).get(label) or {}).get("up_object")
         return None if up is None else [float(v) for v in up]
 
+    @property
+    def scanner_camera_xyz_m(self) -> tuple | None:
+        """The camera of the triangulation laser scanner the views were rendered with (scanner frame, from the
+        laser; ``params["scanner_camera_xyz_m"]``, written by a laser database's build), or None (another sensor, or
+        not recorded): a query from that scanner has the camera's shadows too
+        (``PipelineConfig.verify_camera_shadows``)."""
+        cam = self.params.get("scanner_camera_xyz_m")
+        if cam is None:
+            return None
+        vals = np.asarray(cam, dtype=object).ravel()
+        try:
+            xyz = tuple(float(v) for v in vals) if vals.size == 3 else ()
+        except (TypeError, ValueError):
+            xyz = ()
+        if len(xyz) != 3 or not all(np.isfinite(xyz)):
+            raise DatabaseError(f"The view database's 'scanner_camera_xyz_m' must be three finite numbers (metres). "
+                                f"Got {cam!r:.80} instead.")
+        return xyz
+
     def up_objects(self, label: str) -> list | None:
         """The class's possible up directions in its object frame: ``[up]`` when :meth:`up_object` records one,
         the up of each of two about equally probable resting poses when the database records them

@@ -161,12 +161,14 @@ PRESETS: dict[str, dict] = {
     # base, nearer the flange's face than the plate's: the flange 15 mm in the floor, the plate verifies); a
     # border-cut cluster's translation searched across the object (a strip of a flange's rim: its centroid ~10 cm
     # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
-    # handwheel split at its spokes, half of it posed half-turned with a confident covariance).
+    # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
+    # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                             "size_reference": "principal", "parts": {}, "verify_visibility_image": "border",
                             "verify_max_plane_penetration_m": 0.01, "verify_next_classes": 1,
-                            "pose_surroundings": True, "pose": {"partial_start_step_m": 0.04},
+                            "verify_camera_shadows": True, "pose_surroundings": True,
+                            "pose": {"partial_start_step_m": 0.04},
                             "segmentation": {"max_planes": 2}},
                "run": {"up_from_attitude": True}},
     # a RealSense/Kinect frame ~30 cm from the object (docs/depth-camera.md):

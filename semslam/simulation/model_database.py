@@ -134,5 +134,9 @@ def sensor_database(models: dict[str, ObjectModel], *, sensor: str = "laser", se
         model_views, _ = models_view_clouds(models, seed=seed, n_views=n_model,
                                             config=model_kinect or POSE_MODEL_KINECT, progress=progress,
                                             tied_rests=True)
-    return with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, progress=progress,
-                                          **kwargs), models)
+    db = with_resting_up(build_database(views, classes, seed=seed, model_views=model_views, progress=progress,
+                                        **kwargs), models)
+    if "laser" in sensor:  # the camera whose shadows the views have: verification may expect them in queries too
+        cam = [float((scanner or (laser or LaserViewConfig()).scanner).baseline_m), 0.0, 0.0]
+        object.__setattr__(db, "params", {**db.params, "scanner_camera_xyz_m": cam})
+    return db

@@ -98,6 +98,9 @@ def test_sensor_database_records_views_pose_views_and_resting_up():
     # the socket rests on one face: its up is recorded; the tee lies on either face: both ways up
     np.testing.assert_allclose(db.up_object("reducing_socket"), [0.0, 0.0, 1.0], atol=1e-9)
     assert db.up_object("reducing_tee") is None and len(db.up_objects("reducing_tee")) == 2
+    assert db.scanner_camera_xyz_m == (ScannerConfig().baseline_m, 0.0, 0.0)  # the laser views' camera
+    kinect = sensor_database(two, sensor="kinect", seed=0, n_views=1, n_model_views=0)
+    assert kinect.scanner_camera_xyz_m is None and "scanner_camera_xyz_m" not in kinect.params
 
 
 def test_db_build_with_a_vehicle_file_renders_its_laser(tmp_path, capsys):
@@ -105,13 +108,14 @@ def test_db_build_with_a_vehicle_file_renders_its_laser(tmp_path, capsys):
     from semslam.recognition import load_database
 
     vehicle = tmp_path / "vehicle.toml"
-    write_vehicle_toml(_vehicle(line_count=160), vehicle)
+    write_vehicle_toml(_vehicle(line_count=160, camera_xyz_m=(0.25, 0.0, 0.0)), vehicle)
     out = tmp_path / "db.npz"
     assert main(["--json", "db", "build", "--builtin", "--vehicle", str(vehicle), "--laser-views", "2",
                  "--laser-cut-views", "0", "--model-views", "0", "--out", str(out)]) == 0
     assert json.loads(capsys.readouterr().out)["sensor"] == "laser"  # the vehicle file implies the laser
     db = load_database(out)
     assert all("_laser_hdg" in str(v) for v in db.view_ids) and db.n_views == 2 * len(db.classes)
+    assert db.scanner_camera_xyz_m == (0.25, 0.0, 0.0)  # the vehicle's camera, through the saved file
     assert main(["db", "build", "--builtin", "--vehicle", str(vehicle), "--sensor", "kinect",
                  "--out", str(tmp_path / "x.npz")]) == 1
     err = capsys.readouterr().err
