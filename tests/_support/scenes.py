@@ -54,3 +54,31 @@ def flange_view(tilt_deg: float):
     T[:3, 3] = [0.02, -0.03, 1.0]
     pts = scan_mesh(mesh, T, n_target_points=4000, range_noise_m=0.001, seed=np.random.default_rng(3))
     return mesh, T, pts, (pts - T[:3, 3]) @ T[:3, :3]
+
+
+#: A roof over a floor plate seen by a triangulation laser (scanner frame, z forward, down onto the plates): the
+#: laser at the origin, its camera 0.3 m along x; the plates' depths and the roof's extent (metres).
+ROOF_CAMERA = np.array([0.3, 0.0, 0.0])
+ROOF_FLOOR_Z, ROOF_Z = 1.5, 1.2
+ROOF_X, ROOF_Y = (0.0, 0.1), (-0.1, 0.1)
+
+
+def roof_plates(step=0.004):
+    """The floor plate and the roof above it: points (N, 3), normals facing the scanner (N, 3), and the number of
+    floor points (they come first)."""
+    g = np.arange(-0.2, 0.2 + 1e-9, step)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    floor = np.c_[x.ravel(), y.ravel(), np.full(x.size, ROOF_FLOOR_Z)]
+    x, y = np.meshgrid(np.arange(ROOF_X[0], ROOF_X[1] + 1e-9, step), np.arange(ROOF_Y[0], ROOF_Y[1] + 1e-9, step),
+                       indexing="ij")
+    roof = np.c_[x.ravel(), y.ravel(), np.full(x.size, ROOF_Z)]
+    pts = np.vstack([floor, roof])
+    return pts, np.tile([0.0, 0.0, -1.0], (len(pts), 1)), len(floor)
+
+
+def under_roof(p, eye):
+    """Does the segment from the floor points ``p`` (N, 3) to ``eye`` (3,) cross the roof (its analytic shadow)?"""
+    eye = np.asarray(eye, dtype=float)
+    s = (ROOF_Z - p[:, 2]) / (eye[2] - p[:, 2])
+    q = p + s[:, None] * (eye - p)
+    return (q[:, 0] >= ROOF_X[0]) & (q[:, 0] <= ROOF_X[1]) & (q[:, 1] >= ROOF_Y[0]) & (q[:, 1] <= ROOF_Y[1])

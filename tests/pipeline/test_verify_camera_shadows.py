@@ -18,28 +18,10 @@ from semslam.pipeline.hypothesis import camera_visibility, verification_failure
 from semslam.pose.model import PoseConfig
 from semslam.recognition.database import ViewDatabase
 from semslam.symmetry import Symmetry
+from tests._support.scenes import ROOF_CAMERA, roof_plates, under_roof
 
-CAMERA = (0.3, 0.0, 0.0)  # scanner frame, from the laser; z forward, down onto the plates
-FLOOR_Z, ROOF_Z = 1.5, 1.2
-ROOF_X, ROOF_Y = (0.0, 0.1), (-0.1, 0.1)
-
-
-def _plates(step=0.004):
-    """A floor plate and a roof above it (points and normals facing the scanner); the number of floor points."""
-    g = np.arange(-0.2, 0.2 + 1e-9, step)
-    x, y = np.meshgrid(g, g, indexing="ij")
-    floor = np.c_[x.ravel(), y.ravel(), np.full(x.size, FLOOR_Z)]
-    x, y = np.meshgrid(np.arange(ROOF_X[0], ROOF_X[1] + 1e-9, step), np.arange(ROOF_Y[0], ROOF_Y[1] + 1e-9, step),
-                       indexing="ij")
-    roof = np.c_[x.ravel(), y.ravel(), np.full(x.size, ROOF_Z)]
-    pts = np.vstack([floor, roof])
-    return pts, np.tile([0.0, 0.0, -1.0], (len(pts), 1)), len(floor)
-
-
-def _under_roof(p, eye):
-    s = (ROOF_Z - p[:, 2]) / (eye[2] - p[:, 2])
-    q = p + s[:, None] * (np.asarray(eye) - p)
-    return (q[:, 0] >= ROOF_X[0]) & (q[:, 0] <= ROOF_X[1]) & (q[:, 1] >= ROOF_Y[0]) & (q[:, 1] <= ROOF_Y[1])
+CAMERA = tuple(ROOF_CAMERA)  # scanner frame, from the laser; z forward, down onto the plates
+_plates, _under_roof = roof_plates, under_roof
 
 
 def test_a_right_pose_whose_misses_are_the_camera_shadow_is_explained_only_with_the_camera():

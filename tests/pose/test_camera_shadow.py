@@ -8,31 +8,11 @@ import pytest
 from semslam.pose import _search_kernels as K
 from semslam.pose.model import PoseConfig
 from semslam.pose.search import RangeImage
+from tests._support.scenes import ROOF_CAMERA, ROOF_FLOOR_Z, ROOF_X, ROOF_Y, ROOF_Z, roof_plates, under_roof
 
-# scanner frame, z forward (down onto the plates): the laser at the origin, the camera 0.3 m along x
-CAMERA = np.array([0.3, 0.0, 0.0])
-FLOOR_Z, ROOF_Z = 1.5, 1.2
-ROOF_X, ROOF_Y = (0.0, 0.1), (-0.1, 0.1)
-
-
-def _plates(step=0.004):
-    g = np.arange(-0.2, 0.2 + 1e-9, step)
-    x, y = np.meshgrid(g, g, indexing="ij")
-    floor = np.c_[x.ravel(), y.ravel(), np.full(x.size, FLOOR_Z)]
-    r = np.arange(ROOF_X[0], ROOF_X[1] + 1e-9, step)
-    s = np.arange(ROOF_Y[0], ROOF_Y[1] + 1e-9, step)
-    x, y = np.meshgrid(r, s, indexing="ij")
-    roof = np.c_[x.ravel(), y.ravel(), np.full(x.size, ROOF_Z)]
-    pts = np.vstack([floor, roof])
-    nrm = np.tile([0.0, 0.0, -1.0], (len(pts), 1))  # both face the scanner
-    return pts, nrm, len(floor)
-
-
-def _under_roof(p, eye):
-    """Does the segment from floor points ``p`` to ``eye`` cross the roof rectangle?"""
-    s = (ROOF_Z - p[:, 2]) / (eye[2] - p[:, 2])
-    q = p + s[:, None] * (eye - p)
-    return (q[:, 0] >= ROOF_X[0]) & (q[:, 0] <= ROOF_X[1]) & (q[:, 1] >= ROOF_Y[0]) & (q[:, 1] <= ROOF_Y[1])
+CAMERA = ROOF_CAMERA
+FLOOR_Z = ROOF_FLOOR_Z
+_plates, _under_roof = roof_plates, under_roof
 
 
 def test_the_camera_shadow_of_a_roof_matches_the_analytic_shadow():
