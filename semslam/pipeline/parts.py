@@ -72,6 +72,11 @@ class PartsConfig:
         ``verify_min_fitness``.
     max_unions : int
         Unions evaluated per scan at most (nearest gaps first), a bound on the time. Default 24.
+    view_gaps : bool
+        Learn each class's gap limit from its database views (module docstring, :func:`view_gap_limits`): the
+        largest gap between parts of at least ``VIEW_PART_SHARE`` of a view's points, times
+        ``VIEW_GAP_MARGIN``, never below ``max_gap_factor`` times the tolerance; a union must be within its
+        class's limit. Default False (on in the ``seabed`` preset).
     scene_visibility : bool
         Verify a union's visibility cost against the whole scan (the scene image of
         ``PipelineConfig(verify_visibility_image="scene")``) instead of what ``verify_visibility_image`` says.
@@ -88,6 +93,7 @@ class PartsConfig:
     min_part_fitness: float | None = 0.8
     max_unions: int = 24
     scene_visibility: bool = False
+    view_gaps: bool = False
 
     def __post_init__(self) -> None:
         c = "PartsConfig"
@@ -95,9 +101,10 @@ class PartsConfig:
         check_int("max_candidates", self.max_candidates, caller=c, minimum=1)
         check_int("max_parts", self.max_parts, caller=c, minimum=2, maximum=4)
         check_int("max_unions", self.max_unions, caller=c, minimum=1)
-        if not isinstance(self.scene_visibility, bool):
-            raise InputError(f"The 'scene_visibility' argument of {c} must be a bool. "
-                             f"Got {self.scene_visibility!r} instead.")
+        for name in ("scene_visibility", "view_gaps"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"The {name!r} argument of {c} must be a bool. "
+                                 f"Got {getattr(self, name)!r} instead.")
         if self.min_part_fitness is not None:
             check_positive("min_part_fitness", self.min_part_fitness, caller=c, allow_zero=True)
             if self.min_part_fitness > 1:
@@ -106,6 +113,60 @@ class PartsConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+#: A view's part must hold at least this share of its points for its gap to count (a stray pair of points does not).
+VIEW_PART_SHARE = 0.05
+#: The learnt gap limit is the views' largest gap times this (the scan's sampling differs from the views').
+VIEW_GAP_MARGIN = 1.15
+
+
+def largest_part_gap(points_xyz_m: np.ndarray, tolerance_m: float, *, min_share: float = VIEW_PART_SHARE) -> float:
+    """The widest gap that single-linkage joining of the clusters of ``points_xyz_m`` (Euclidean clusters at
+    ``tolerance_m``) into one needs, counting only clusters of at least ``min_share`` of the points (0 when the
+    points are one cluster): the longest edge of the minimum spanning tree between those clusters."""
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
+    from ..segmentation import euclidean_labels
+
+    p = np.ascontiguousarray(points_xyz_m, dtype=np.float64)
+    n = len(p)
+    if n < 2:
+        return 0.0
+    labels = euclidean_labels(p, tolerance_m=tolerance_m)
+    counts = np.bincount(labels)
+    parts = [p[labels == c] for c in np.flatnonzero(counts >= max(min_share * n, 1))]
+    if len(parts) < 2:
+        return 0.0
+    dist = np.zeros((len(parts), len(parts)))
+    for i, j in itertools.combinations(range(len(parts)), 2):
+        dist[i, j] = max(float(cKDTree(parts[i]).query(parts[j], k=1)[0].min()), 1e-12)
+    return float(minimum_spanning_tree(dist).toarray().max())
+
+
+def view_gap_limits(db: Any, tolerance_m: float, floor_m: float) -> dict[str, float]:
+    """Per class of ``db``: the gap two parts of one of its objects may have in a scan clustered at ``tolerance_m``,
+    learnt from its views (``VIEW_GAP_MARGIN`` times the largest :func:`largest_part_gap` of its views), at least
+    ``floor_m``."""
+    out = {}
+    for label in db.classes:
+        widest = max((largest_part_gap(db.view_points(int(i)), tolerance_m) for i in db.views_of(label)), default=0.0)
+        out[label] = max(float(floor_m), VIEW_GAP_MARGIN * widest)
+    return out
+
+
+def _gap_limits(rec: Any, tolerance_m: float) -> dict[str, float]:
+    """The recogniser's per-class gap limits at ``tolerance_m`` (learnt once per tolerance when
+    ``PartsConfig.view_gaps``, else ``max_gap_factor`` times the tolerance for every class)."""
+    pcfg: PartsConfig = rec.config.parts
+    floor = pcfg.max_gap_factor * tolerance_m
+    if not pcfg.view_gaps:
+        return {label: floor for label in rec.db.classes}
+    cache = rec.__dict__.setdefault("_part_gap_limits", {})
+    key = round(float(tolerance_m), 9)
+    if key not in cache:
+        cache[key] = view_gap_limits(rec.db, tolerance_m, floor)
+    return cache[key]
 
 
 def _eligible(outcome: ClusterOutcome) -> bool:
@@ -149,6 +210,22 @@ def _candidate_unions(n: int, gaps: dict, cfg: PartsConfig) -> list[tuple[int, .
     return [k for k, _ in sorted(scored.items(), key=lambda kv: (kv[1], len(kv[0]), kv[0]))][:cfg.max_unions]
 
 
+def _widest_gap(members: tuple[int, ...], gaps: dict) -> float:
+    """The longest edge of the minimum spanning tree joining ``members`` by the pairwise ``gaps`` (inf when they
+    are not joined)."""
+    inside = set(members)
+    joined, widest = {members[0]}, 0.0
+    while joined != inside:
+        steps = [(d, j) for (a, b), d in gaps.items() for i, j in ((a, b), (b, a))
+                 if i in joined and j in inside and j not in joined]
+        if not steps:
+            return np.inf
+        d, j = min(steps)
+        widest = max(widest, d)
+        joined.add(j)
+    return widest
+
+
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
     """Share of each part's points within ``icp_max_correspondence_m`` of the model under ``det``'s pose."""
     from ..pose.model import _nearest
@@ -172,7 +249,9 @@ def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clus
     pcfg: PartsConfig = cfg.parts
     tolerance = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
     pts = [seg.clusters[k].points_xyz_m for k in eligible]
-    unions = _candidate_unions(len(eligible), _gaps(pts, pcfg.max_gap_factor * tolerance), pcfg)
+    limits = _gap_limits(rec, tolerance)
+    gaps = _gaps(pts, max(limits.values()))
+    unions = _candidate_unions(len(eligible), gaps, pcfg)
     max_plausible = rec.max_plausible_extent_m()
     min_part = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
     accepted = []
@@ -195,6 +274,9 @@ def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clus
             continue
         if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
             _log.debug("union %s: extent %.3f m too big for %s", ks, extent[0], label)
+            continue
+        if _widest_gap(members, gaps) > limits[label]:
+            _log.debug("union %s: its parts too far apart for %s", ks, label)
             continue
         raw = [_input_indices(seg, k) for k in ks]
         raw_idx = np.sort(np.concatenate(raw))

@@ -187,6 +187,11 @@ class ScanRecognizer:
         for label in self.db.classes:
             first = int(self.db.views_of(label)[0])
             self.pose_model(label, first)
+        parts, tolerance = self.config.parts, self.config.segmentation.cluster_tolerance_m
+        if parts is not None and parts.view_gaps and not isinstance(tolerance, str):  # gaps learnt from the views
+            from .parts import _gap_limits
+
+            _gap_limits(self, float(tolerance))
         if not self.config.estimate_pose:
             return
         for i, label in enumerate(self.db.classes):  # every class: the symmetry kinds take different paths

@@ -163,9 +163,11 @@ PRESETS: dict[str, dict] = {
     # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen).
+    # Unions of parts as far apart as the class's own views show them (a wet-mate receptacle's cap and flange 8 cm).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                            "size_reference": "principal", "parts": {}, "verify_visibility_image": "border",
+                            "size_reference": "principal", "parts": {"view_gaps": True},
+                            "verify_visibility_image": "border",
                             "verify_max_plane_penetration_m": 0.01, "verify_next_classes": 1,
                             "verify_camera_shadows": True, "pose_surroundings": True,
                             "pose": {"partial_start_step_m": 0.04},

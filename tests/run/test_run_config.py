@@ -66,8 +66,8 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     """objects resting on the seabed beside structure: the cluttered recipe (no posed object more than 10 mm behind
     the plane it lies on included), a wall or slope removed as a second plane, a class failing verification followed
     by the next one, border-cut clusters searched across the object, the scan's other clusters about a cluster seen
-    by the pose search, verification allowing for the laser camera's shadows, the pose kept upright with the AHRS's
-    gravity (docs/configuration.md)."""
+    by the pose search, verification allowing for the laser camera's shadows, part unions as far apart as the views
+    show, the pose kept upright with the AHRS's gravity (docs/configuration.md)."""
     seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
     p, c = seabed.pipeline_config(), cluttered.pipeline_config()
     assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
@@ -76,8 +76,9 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     assert p.pose.partial_start_step_m == 0.04 and c.pose.partial_start_step_m == 0.0  # upright search only
     assert p.pose_surroundings and not c.pose_surroundings  # not measured on the catalogue
     assert p.verify_camera_shadows and not c.verify_camera_shadows  # not measured on the catalogue
+    assert p.parts.view_gaps and not c.parts.view_gaps  # not measured on the catalogue
     assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose,
-                               pose_surroundings=False, verify_camera_shadows=False) == c
+                               pose_surroundings=False, verify_camera_shadows=False, parts=c.parts) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
