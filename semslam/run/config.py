@@ -145,12 +145,14 @@ class RunSection(BaseModel):
 PRESETS: dict[str, dict] = {
     # today's defaults: PipelineConfig() and SlamConfig()
     "default": {},
-    # cluttered scenes (rocks, debris, many classes): benchmarks/catalogue.py's CONFIGS["catalogue_border_floor"],
+    # cluttered scenes (rocks, debris, many classes): benchmarks/catalogue.py's CONFIGS["catalogue_border_floor_gaps"],
     # its best-measured setting (benchmarks/RESULTS.md): hypothesis verification, border-cut clusters flagged and
     # verified against the scene, sizes along principal axes, part-based unions, no posed object more than 10 mm
-    # inside the floor it lies on (a rock posed as a fitting: clutter accepted 2.2-8.5 % -> 0-0.5 %)
+    # inside the floor it lies on (a rock posed as a fitting: clutter accepted 2.2-8.5 % -> 0-0.5 %), parts unioned
+    # across the gaps the class's own views show (a wet-mate receptacle's cap and flange 8 cm apart)
     "cluttered": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                               "size_reference": "principal", "parts": {}, "verify_visibility_image": "border",
+                               "size_reference": "principal", "parts": {"view_gaps": True},
+                               "verify_visibility_image": "border",
                                "verify_max_plane_penetration_m": 0.01}},
     # objects resting on the seabed (their most probable resting pose, gravity from the AHRS), beside structure and
     # cut by the swath's border, among clutter: "cluttered" plus a second plane removed (a wall, a slope: an object
@@ -163,7 +165,6 @@ PRESETS: dict[str, dict] = {
     # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen).
-    # Unions of parts as far apart as the class's own views show them (a wet-mate receptacle's cap and flange 8 cm).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                             "size_reference": "principal", "parts": {"view_gaps": True},

@@ -39,15 +39,15 @@ def test_default_preset_is_todays_defaults():
 
 
 def test_cluttered_preset_is_the_catalogue_benchmarks_best_setting():
-    """catalogue_border_floor: the best-measured setting of benchmarks/catalogue.py (RESULTS.md); the preset and the
-    benchmark's dict must not drift apart."""
-    want = PipelineConfig(**_catalogue_configs()["catalogue_border_floor"])
+    """catalogue_border_floor_gaps: the best-measured setting of benchmarks/catalogue.py (RESULTS.md); the preset
+    and the benchmark's dict must not drift apart."""
+    want = PipelineConfig(**_catalogue_configs()["catalogue_border_floor_gaps"])
     got = load_run_config(preset="cluttered").pipeline_config()
     assert got == want
     assert got != PipelineConfig()
     assert (got.verify_min_fitness, got.verify_max_visibility, got.border, got.verify_visibility_image,
-            got.size_reference, got.parts, got.verify_max_plane_penetration_m) == (0.95, 0.15, "flag", "border",
-                                                                                   "principal", PartsConfig(), 0.01)
+            got.size_reference, got.parts, got.verify_max_plane_penetration_m) == (
+        0.95, 0.15, "flag", "border", "principal", PartsConfig(view_gaps=True), 0.01)
     assert load_run_config(preset="cluttered").slam_config() == SlamConfig()  # recognition only
 
 
@@ -66,8 +66,8 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     """objects resting on the seabed beside structure: the cluttered recipe (no posed object more than 10 mm behind
     the plane it lies on included), a wall or slope removed as a second plane, a class failing verification followed
     by the next one, border-cut clusters searched across the object, the scan's other clusters about a cluster seen
-    by the pose search, verification allowing for the laser camera's shadows, part unions as far apart as the views
-    show, the pose kept upright with the AHRS's gravity (docs/configuration.md)."""
+    by the pose search, verification allowing for the laser camera's shadows, the pose kept upright with the AHRS's
+    gravity (docs/configuration.md)."""
     seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
     p, c = seabed.pipeline_config(), cluttered.pipeline_config()
     assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
@@ -76,9 +76,9 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     assert p.pose.partial_start_step_m == 0.04 and c.pose.partial_start_step_m == 0.0  # upright search only
     assert p.pose_surroundings and not c.pose_surroundings  # not measured on the catalogue
     assert p.verify_camera_shadows and not c.verify_camera_shadows  # not measured on the catalogue
-    assert p.parts.view_gaps and not c.parts.view_gaps  # not measured on the catalogue
+    assert p.parts.view_gaps and c.parts.view_gaps  # part gaps learnt from the views in both
     assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose,
-                               pose_surroundings=False, verify_camera_shadows=False, parts=c.parts) == c
+                               pose_surroundings=False, verify_camera_shadows=False) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
@@ -89,7 +89,7 @@ def test_a_file_overrides_its_preset_and_the_command_lines_preset_must_agree(tmp
     rc = load_run_config(f)
     p = rc.pipeline_config()
     assert rc.preset == "cluttered" and p.reject_margin == 2.0 and p.border == "flag"  # override + preset kept
-    assert p.parts == PartsConfig(max_parts=4)
+    assert p.parts == PartsConfig(max_parts=4, view_gaps=True)  # the table merged into the preset's
     assert rc.slam_config() == SlamConfig().updated(smooth=False)
     assert rc.run.modes == ("pose", "dr") and rc.run.backend == "isam2"
     assert load_run_config(f, preset="cluttered") == rc
@@ -207,7 +207,7 @@ def test_cli_run_with_the_cluttered_preset_writes_the_resolved_config(tmp_path, 
     capsys.readouterr()
     resolved = load_run_config(run / CONFIG_FILE)
     assert resolved.preset == "cluttered"
-    assert resolved.pipeline_config() == PipelineConfig(**{**_catalogue_configs()["catalogue_border_floor"],
+    assert resolved.pipeline_config() == PipelineConfig(**{**_catalogue_configs()["catalogue_border_floor_gaps"],
                                                            "reject_margin": 5.0})
     assert resolved.run.modes == ("pose",) and resolved.run.seed == 2  # explicit options over the file
     # the recogniser ran with it: the pipeline settings recorded beside the detections are the same
