@@ -125,8 +125,6 @@ def largest_part_gap(points_xyz_m: np.ndarray, tolerance_m: float, *, min_share:
     """The widest gap that single-linkage joining of the clusters of ``points_xyz_m`` (Euclidean clusters at
     ``tolerance_m``) into one needs, counting only clusters of at least ``min_share`` of the points (0 when the
     points are one cluster): the longest edge of the minimum spanning tree between those clusters."""
-    from scipy.sparse.csgraph import minimum_spanning_tree
-
     from ..segmentation import euclidean_labels
 
     p = np.ascontiguousarray(points_xyz_m, dtype=np.float64)
@@ -138,10 +136,11 @@ def largest_part_gap(points_xyz_m: np.ndarray, tolerance_m: float, *, min_share:
     parts = [p[labels == c] for c in np.flatnonzero(counts >= max(min_share * n, 1))]
     if len(parts) < 2:
         return 0.0
-    dist = np.zeros((len(parts), len(parts)))
+    trees = [cKDTree(q) for q in parts]
+    dist = np.full((len(parts), len(parts)), np.inf)
     for i, j in itertools.combinations(range(len(parts)), 2):
-        dist[i, j] = max(float(cKDTree(parts[i]).query(parts[j], k=1)[0].min()), 1e-12)
-    return float(minimum_spanning_tree(dist).toarray().max())
+        dist[i, j] = float(trees[i].query(parts[j], k=1)[0].min())
+    return _spanning_gap(dist)
 
 
 def view_gap_limits(db: Any, tolerance_m: float, floor_m: float) -> dict[str, float]:
@@ -212,18 +211,24 @@ def _candidate_unions(n: int, gaps: dict, cfg: PartsConfig) -> list[tuple[int, .
 
 def _widest_gap(members: tuple[int, ...], gaps: dict) -> float:
     """The longest edge of the minimum spanning tree joining ``members`` by the pairwise ``gaps`` (inf when they
-    are not joined)."""
-    inside = set(members)
-    joined, widest = {members[0]}, 0.0
-    while joined != inside:
-        steps = [(d, j) for (a, b), d in gaps.items() for i, j in ((a, b), (b, a))
-                 if i in joined and j in inside and j not in joined]
-        if not steps:
-            return np.inf
-        d, j = min(steps)
-        widest = max(widest, d)
-        joined.add(j)
-    return widest
+    are not joined): :func:`_spanning_gap` on their gap matrix."""
+    pos = {k: n for n, k in enumerate(members)}
+    dist = np.full((len(members), len(members)), np.inf)
+    for (a, b), d in gaps.items():
+        if a in pos and b in pos:
+            dist[pos[a], pos[b]] = d
+    return _spanning_gap(dist)
+
+
+def _spanning_gap(dist: np.ndarray) -> float:
+    """The longest edge of the minimum spanning tree of the upper triangle of ``dist`` (inf: no edge; inf when the
+    graph is not connected)."""
+    from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+
+    w = np.where(np.isfinite(dist), np.maximum(dist, 1e-12), 0.0)  # scipy: 0 is no edge
+    if connected_components(np.triu(w, 1), directed=False)[0] > 1:
+        return np.inf
+    return float(minimum_spanning_tree(np.triu(w, 1)).toarray().max(initial=0.0))
 
 
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
