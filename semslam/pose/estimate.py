@@ -36,7 +36,7 @@ from .covariance import calibration_of, pose_covariance, widen_untrusted
 from .icp_refine import (  # noqa: F401 (_final_score, _icp_field_nearest: tests use them here)
     _final_score, _final_scores, _icp_field_nearest, _icp_small_gicp, _refine, _small_gicp_T, back_facing_shares)
 from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
-from .search import rotation_distances, search_hypotheses
+from .search import DEPTH_TWIN_MIN_M, rotation_distances, search_hypotheses
 
 __all__ = ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "pose_verdict", "prepare_pose_model",
            "back_facing_shares"]
@@ -351,7 +351,8 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     refined = [(fit + cfg.visibility_weight * vis + cfg.back_facing_weight * b, fit, vis, T, h)
                for (fit, vis), T, h, b in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps, back)]
     refined.sort(key=lambda x: x[0])
-    best = refined[0]
+    # a depth twin (search._depth_twin) is never chosen and leaves the margin alone: it widens the covariance only
+    best = next((r for r in refined if not r[4].depth_twin), refined[0])
     nearest = None
     if field_icp:
         final, nearest = _icp_field_nearest(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
@@ -360,12 +361,16 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     Tb = best[3]
     margin = float("inf")
     distinct = []  # the hypotheses not equivalent to the best (another basin): the covariance's spread
-    for other in refined[1:]:
+    for other in refined:
         To = other[3]
+        if other is best:
+            continue
         rot = rotation_distances(Tb[:3, :3], To[None, :3, :3], sym)[0]
         # positions of the object origin in the scanner frame
         dt = np.linalg.norm(Tb[:3, :3].T @ Tb[:3, 3] - To[:3, :3].T @ To[:3, 3])
-        if rot > np.radians(10.0) or dt > 0.01:
+        if other[4].depth_twin and dt > DEPTH_TWIN_MIN_M:
+            distinct.append((max(float(other[0] - best[0]), 0.0), To))
+        elif rot > np.radians(10.0) or dt > 0.01:
             margin = min(margin, other[0] - best[0])
             distinct.append((float(other[0] - best[0]), To))
     extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],

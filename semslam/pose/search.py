@@ -33,6 +33,11 @@ from .search_index import DistanceField, RadiusGrid, RangeImage, ViewCentroids  
 #: seed 3; 0.1 none of the 4 strips looked at (0.05: 2), and the panel front's strips (0.1-0.4 better) are still
 #: found. Held out, some strips of seeds 2 and 4 still take it (benchmarks/history/real-models.md, session 19)
 PARTIAL_DEPTH_MARGIN = 0.1
+#: the shifts (m) of the best hypothesis along the view from which :func:`_depth_twin` looks for the same orientation
+#: at another depth (a flat plate's far face on the seen one: 12 mm for the shared valve-panel base)
+DEPTH_TWIN_SHIFTS_M = (-0.024, -0.018, -0.012, -0.006, 0.006, 0.012, 0.018, 0.024)
+#: how far (m, along the view) a translation must end from the best hypothesis's to be its depth twin
+DEPTH_TWIN_MIN_M = 0.005
 _PSI = 1.533751168755204288118041  # super-Fibonacci constant (Alexa 2022)
 
 
@@ -88,12 +93,15 @@ class RotationHierarchy:
 
 @dataclass(frozen=True, eq=False)
 class Hypothesis:
-    """A pose hypothesis ``T_object_scanner`` (4, 4) with its fit, visibility and total costs."""
+    """A pose hypothesis ``T_object_scanner`` (4, 4) with its fit, visibility and total costs. A ``depth_twin``
+    (:func:`_depth_twin`) is the best hypothesis's orientation at another depth along the view: refined and scored
+    for the pose covariance's spread, never chosen."""
 
     T_object_scanner: np.ndarray
     fit: float
     visibility: float
     score: float
+    depth_twin: bool = False
 
 
 def rotation_distances(R_a: np.ndarray, R_bs: np.ndarray, symmetry: Symmetry) -> np.ndarray:
@@ -142,8 +150,10 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     L-shaped valve (ring and lever): there the radius rule starts ~10 cm off. ``partial_step_m`` > 0 (a cluster
     cut by the scan's border) adds the starts of :func:`_partial_offsets` within ``object_radius_m`` of the first:
     the part seen may lie anywhere on the object, across the view and along it; a start off the first's depth wins
-    only by :data:`PARTIAL_DEPTH_MARGIN`. The visibility term's range image is that of ``points``, with
-    ``surroundings`` (K, 3: the scan's other objects about the cluster) entered on its grid.
+    only by :data:`PARTIAL_DEPTH_MARGIN`, and the best start of the best orientation at another depth is returned
+    last as its ``depth_twin`` (:func:`_depth_twin`) when it fits within that margin. The visibility term's range
+    image is that of ``points``, with ``surroundings`` (K, 3: the scan's other objects about the cluster) entered
+    on its grid.
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
     3 x 3 x 3 grid of rotations (+-step about each object axis, about the cluster's centroid) per step, with the
@@ -193,7 +203,36 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                               visibility_tol_m)
         if h is not h0:  # both go to the ICP: a better search score is not always a better ICP start
             out.append(h)
-    return out, image
+    twin = _depth_twin(out[0], points, view, field, image, model_vis_pts, model_vis_nrm,
+                       np.asarray(truncations_m[-2:], dtype=np.float64), tau_m, visibility_weight,
+                       visibility_tol_m) if out and partial_step_m > 0 else None
+    return out + ([twin] if twin is not None else []), image
+
+
+def _depth_twin(h: Hypothesis, points: np.ndarray, view: np.ndarray, field: DistanceField, image: RangeImage,
+                model_vis_pts: np.ndarray, model_vis_nrm: np.ndarray, truncations: np.ndarray, tau_m: float,
+                visibility_weight: float, visibility_tol_m: float) -> Hypothesis | None:
+    """The orientation of ``h`` at another depth: its translation shifted along the unit ``view`` (scanner frame) by
+    each of :data:`DEPTH_TWIN_SHIFTS_M`, aligned with the fine ``truncations`` (so that a start stays in the basin it
+    is in), and the best fit of those ending more than :data:`DEPTH_TWIN_MIN_M` from ``h`` along the view, when it
+    fits within :data:`PARTIAL_DEPTH_MARGIN` of ``h`` (else None). A part of a cluster cut by the scan's border can
+    sit at two depths (a flat plate's seen face is its near or its far face, the plate 12 mm apart); the search
+    keeps one translation per orientation, so the covariance would not know of the other."""
+    R, t = h.T_object_scanner[:3, :3], h.T_object_scanner[:3, 3]
+    shifts = np.asarray(DEPTH_TWIN_SHIFTS_M)
+    Rs = np.ascontiguousarray(np.broadcast_to(R, (len(shifts), 3, 3)))
+    ts = np.ascontiguousarray(t + shifts[:, None] * (R @ view))  # the cluster moved by s view: t + R (s view)
+    fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets,
+                            truncations, float(tau_m))
+    depth = (ts - t) @ (R @ view)  # how far each ended from h along the view
+    ok = np.flatnonzero((np.abs(depth) > DEPTH_TWIN_MIN_M) & (fit < h.fit + PARTIAL_DEPTH_MARGIN))
+    if not len(ok):
+        return None
+    k = ok[np.argmin(fit[ok])]
+    vis = float(image.visibility_cost(Rs[k:k + 1], ts[k:k + 1], model_vis_pts, model_vis_nrm, visibility_tol_m)[0])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, ts[k]
+    return Hypothesis(T, float(fit[k]), vis, float(fit[k]) + visibility_weight * vis, depth_twin=True)
 
 
 @dataclass(frozen=True, eq=False)
