@@ -149,9 +149,10 @@ PRESETS: dict[str, dict] = {
     # its best-measured setting (benchmarks/RESULTS.md): hypothesis verification, border-cut clusters flagged and
     # verified against the scene, sizes along principal axes, part-based unions, no posed object more than 10 mm
     # inside the floor it lies on (a rock posed as a fitting: clutter accepted 2.2-8.5 % -> 0-0.5 %), parts unioned
-    # across the gaps the class's own views show (a wet-mate receptacle's cap and flange 8 cm apart)
+    # across the gaps the class's own views show (a wet-mate receptacle's cap and flange 8 cm apart), up to four
+    # clusters per union (a gate valve in four pieces)
     "cluttered": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                               "size_reference": "principal", "parts": {"view_gaps": True},
+                               "size_reference": "principal", "parts": {"view_gaps": True, "max_parts": 4},
                                "verify_visibility_image": "border",
                                "verify_max_plane_penetration_m": 0.01}},
     # objects resting on the seabed (their most probable resting pose, gravity from the AHRS), beside structure and
@@ -164,14 +165,16 @@ PRESETS: dict[str, dict] = {
     # border-cut cluster's translation searched across the object (a strip of a flange's rim: its centroid ~10 cm
     # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
-    # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen).
+    # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen). The
+    # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right yaw ranked past 96 by the
+    # fit of 48 points).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                            "size_reference": "principal", "parts": {"view_gaps": True},
+                            "size_reference": "principal", "parts": {"view_gaps": True, "max_parts": 4},
                             "verify_visibility_image": "border",
                             "verify_max_plane_penetration_m": 0.01, "verify_next_classes": 1,
                             "verify_camera_shadows": True, "pose_surroundings": True,
-                            "pose": {"partial_start_step_m": 0.04},
+                            "pose": {"partial_start_step_m": 0.04, "n_candidates": 256},
                             "segmentation": {"max_planes": 2}},
                "run": {"up_from_attitude": True}},
     # a RealSense/Kinect frame ~30 cm from the object (docs/depth-camera.md):
