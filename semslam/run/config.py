@@ -166,8 +166,8 @@ PRESETS: dict[str, dict] = {
     # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen). The
-    # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right yaw ranked past 96 by the
-    # fit of 48 points).
+    # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right orientation ranked past
+    # 96 by the fit of 48 points).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                             "size_reference": "principal", "parts": {"view_gaps": True, "max_parts": 4},
