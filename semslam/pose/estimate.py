@@ -358,9 +358,27 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         final, nearest = _icp_field_nearest(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
     else:
         final = _icp_small_gicp(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
+    margin, distinct = _margin_and_alternatives(refined, best, sym)
+    extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
+              "n_hypotheses": len(rotations), "search_points": len(pts), "upright": upright is not None,
+              "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined],
+              # for the covariance's hypothesis spread (popped by estimate_object_pose)
+              "_alternatives": distinct}
+    # the verdict's visibility is the cluster's own: the surroundings choose between the hypotheses, they do not make
+    # a pose more trustworthy (a wrong pose overlapping the rest of the object would otherwise look clean)
+    vis = best[2] if surroundings is None or not len(surroundings) else _cluster_visibility(pts, vp, model, cfg,
+                                                                                             best[3], cluster)
+    return final, vis, margin, extras, t2, nearest
+
+
+def _margin_and_alternatives(refined: list, best: tuple, sym: Symmetry) -> tuple[float, list]:
+    """The score margin of ``best`` among the ``refined`` hypotheses (``(score, fit, vis, T_object_scanner,
+    Hypothesis)`` each): the least score difference to one not equivalent to it (> 10 degrees modulo the symmetry or
+    > 1 cm away; inf when none), and those hypotheses as ``(score difference, T)`` pairs, the covariance's spread. A
+    depth twin more than :data:`DEPTH_TWIN_MIN_M` away is in the spread (its difference at least 0), not the margin."""
     Tb = best[3]
     margin = float("inf")
-    distinct = []  # the hypotheses not equivalent to the best (another basin): the covariance's spread
+    distinct = []
     for other in refined:
         To = other[3]
         if other is best:
@@ -373,16 +391,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         elif rot > np.radians(10.0) or dt > 0.01:
             margin = min(margin, other[0] - best[0])
             distinct.append((float(other[0] - best[0]), To))
-    extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
-              "n_hypotheses": len(rotations), "search_points": len(pts), "upright": upright is not None,
-              "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined],
-              # for the covariance's hypothesis spread (popped by estimate_object_pose)
-              "_alternatives": distinct}
-    # the verdict's visibility is the cluster's own: the surroundings choose between the hypotheses, they do not make
-    # a pose more trustworthy (a wrong pose overlapping the rest of the object would otherwise look clean)
-    vis = best[2] if surroundings is None or not len(surroundings) else _cluster_visibility(pts, vp, model, cfg,
-                                                                                             best[3], cluster)
-    return final, vis, margin, extras, t2, nearest
+    return margin, distinct
 
 
 def _cluster_visibility(pts: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,

@@ -130,8 +130,7 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
                       start_separation_m: float = 0.015, local_steps_rad: tuple = (),
-                      camera_offset_m: tuple | None = None,
-                      partial_step_m: float = 0.0,
+                      camera_offset_m: tuple | None = None, partial_step_m: float = 0.0,
                       surroundings: np.ndarray | None = None) -> tuple[list[Hypothesis], RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of ``n_coarse_points`` of
@@ -156,18 +155,15 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     on its grid.
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
-    3 x 3 x 3 grid of rotations (+-step about each object axis, about the cluster's centroid) per step, with the
-    same translation alignment and score, keeping the best (:func:`_local_refine`); the refined hypothesis is
-    returned right after its original when it differs (both are worth an ICP: on a border-cut butterfly valve the
-    refined start scored better but its ICP ended worse). The grid is ~10 degrees apart, and for a large object
-    (the gate valve, whose handwheel is 14 cm from its centre) that is beyond the ICP's basin: a start 10 degrees
-    off moves the far points by ~2.5 cm, and the ICP stops in a wrong minimum.
+    3 x 3 x 3 grid of rotations per step (:func:`_local_refine`); the refined hypothesis is returned right after its
+    original when it differs (both are worth an ICP: on a border-cut butterfly valve the refined start scored better
+    but its ICP ended worse).
     """
     c = points.mean(axis=0)
     view = viewpoint - c
     view /= max(np.linalg.norm(view), 1e-12)
     sub = np.ascontiguousarray(points[np.linspace(0, len(points) - 1, min(len(points), n_coarse_points)).astype(int)])
-    coarse_truncations = np.asarray(truncations_m[:-2], dtype=np.float64)
+    coarse_truncations, fine = (np.asarray(t, dtype=np.float64) for t in (truncations_m[:-2], truncations_m[-2:]))
 
     starts = _TranslationStarts(field, view, c, object_radius_m, view_centroids, start_separation_m,
                                 float(tau_m), _partial_offsets(view, object_radius_m, partial_step_m))
@@ -180,8 +176,8 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     fit0, ts = starts.best_aligned(Rs, sub, coarse_truncations)
     cand = np.argsort(fit0, kind="stable")[:n_candidates]
     Rs, ts = np.ascontiguousarray(Rs[cand]), np.ascontiguousarray(ts[cand])
-    fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets,
-                            np.asarray(truncations_m[-2:], dtype=np.float64), float(tau_m))
+    fit = K.align_and_score(Rs, ts, np.ascontiguousarray(points), field.params, field.cell_m, field.offsets, fine,
+                            float(tau_m))
     # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
     cand = np.argsort(fit, kind="stable")[:n_candidates]
     image = RangeImage.build(points, viewpoint, cell_m=image_cell_m,
@@ -203,8 +199,7 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                               visibility_tol_m)
         if h is not h0:  # both go to the ICP: a better search score is not always a better ICP start
             out.append(h)
-    twin = _depth_twin(out[0], points, view, field, image, model_vis_pts, model_vis_nrm,
-                       np.asarray(truncations_m[-2:], dtype=np.float64), tau_m, visibility_weight,
+    twin = _depth_twin(out[0], points, view, field, image, model_vis_pts, model_vis_nrm, fine, tau_m, visibility_weight,
                        visibility_tol_m) if out and partial_step_m > 0 else None
     return out + ([twin] if twin is not None else []), image
 
@@ -313,7 +308,10 @@ def _local_refine(h: Hypothesis, points: np.ndarray, centroid: np.ndarray, field
                   tau_m: float, visibility_weight: float, visibility_tol_m: float) -> Hypothesis:
     """The best of ``h`` and its 26 neighbours ``R' = D R`` (``D`` of :func:`_local_rotations`, a rotation of the
     object about the point ``m`` the cluster's centroid maps to: ``t' = D (t - m) + m``), each translation-aligned
-    on the distance field and scored as in :func:`search_hypotheses` (fit + weighted visibility cost)."""
+    on the distance field and scored as in :func:`search_hypotheses` (fit + weighted visibility cost). The search's
+    grid is ~10 degrees apart, and for a large object (the gate valve, whose handwheel is 14 cm from its centre) that
+    is beyond the ICP's basin: a start 10 degrees off moves the far points by ~2.5 cm, and the ICP stops in a wrong
+    minimum."""
     D = _local_rotations(step_rad)
     R, t = h.T_object_scanner[:3, :3], h.T_object_scanner[:3, 3]
     m = R @ centroid + t
