@@ -86,6 +86,10 @@ class PartsConfig:
         and against the union's own points the model's surface there counts as a contradiction, although the
         scan has points there. Against the scene, only model points in front of what the scanner saw (free
         space) or behind a plane contradict. Default False.
+    detected_parts : bool
+        A cluster already recognised may be a part of a union with at least one unknown cluster, and a union that
+        passes replaces the detections of its parts: a gate valve's body alone verifies as a blind flange (its end
+        flange), and the union with its handwheel is the gate valve. Default False.
     """
 
     max_gap_factor: float = 3.5
@@ -95,6 +99,7 @@ class PartsConfig:
     max_unions: int = 24
     scene_visibility: bool = False
     view_gaps: bool = False
+    detected_parts: bool = False
 
     def __post_init__(self) -> None:
         c = "PartsConfig"
@@ -102,7 +107,7 @@ class PartsConfig:
         check_int("max_candidates", self.max_candidates, caller=c, minimum=1)
         check_int("max_parts", self.max_parts, caller=c, minimum=2, maximum=4)
         check_int("max_unions", self.max_unions, caller=c, minimum=1)
-        for name in ("scene_visibility", "view_gaps"):
+        for name in ("scene_visibility", "view_gaps", "detected_parts"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"The {name!r} argument of {c} must be a bool. "
                                  f"Got {getattr(self, name)!r} instead.")
@@ -169,9 +174,10 @@ def _gap_limits(rec: Any, tolerance_m: float) -> dict[str, float]:
     return cache[key]
 
 
-def _eligible(outcome: ClusterOutcome) -> bool:
-    """Unknown clusters that a union may use (not those too big for every class: a union is bigger still)."""
-    return outcome.detection is None and "for any class" not in outcome.reason
+def _eligible(outcome: ClusterOutcome, detected_parts: bool = False) -> bool:
+    """Clusters that a union may use: unknown ones (not those too big for every class: a union is bigger still) and,
+    with ``detected_parts``, recognised ones."""
+    return (outcome.detection is None or detected_parts) and "for any class" not in outcome.reason
 
 
 def _gaps(points: list[np.ndarray], limit_m: float) -> dict[tuple[int, int], float]:
@@ -263,6 +269,8 @@ def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clus
     accepted = []
     for u, members in enumerate(unions):
         ks = [eligible[i] for i in members]
+        if all(outcomes[k].detection is not None for k in ks):
+            continue  # recognised parts only: each has its detection (PartsConfig.detected_parts)
         idx = np.concatenate([seg.cluster_indices[k] for k in ks])
         cloud = seg.segmented_cloud.select(idx)
         extent = principal_extent(np.ascontiguousarray(cloud.points_xyz_m, dtype=np.float64))
@@ -310,7 +318,7 @@ def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutc
     t0 = time.perf_counter()
     cfg = rec.config
     outcomes, detections = list(outcomes), list(detections)
-    eligible = [o.cluster_index for o in outcomes if _eligible(o)]
+    eligible = [o.cluster_index for o in outcomes if _eligible(o, cfg.parts.detected_parts)]
     if cfg.border == "reject":
         eligible = [k for k in eligible if not outcomes[k].touches_border]
     timings["parts"] = 0.0
@@ -322,7 +330,8 @@ def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutc
         if used & set(ks):
             continue
         used |= set(ks)
-        detections.append(det)
+        replaced = [outcomes[k].detection for k in ks if outcomes[k].detection is not None]
+        detections = [d for d in detections if not any(d is r for r in replaced)] + [det]
         reason = (f"detected as a union of clusters {ks}" + ("" if det.reliable else " (unreliable pose)")
                   + (", touches the scan border" if border else ""))
         for k in ks:

@@ -167,10 +167,12 @@ PRESETS: dict[str, dict] = {
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen). The
     # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right orientation ranked past
-    # 96 by the fit of 48 points).
+    # 96 by the fit of 48 points), and a recognised cluster may be a part of a union (a gate valve's body alone
+    # verifies as a blind flange).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                            "size_reference": "principal", "parts": {"view_gaps": True, "max_parts": 4},
+                            "size_reference": "principal",
+                            "parts": {"view_gaps": True, "max_parts": 4, "detected_parts": True},
                             "verify_visibility_image": "border",
                             "verify_max_plane_penetration_m": 0.01, "verify_next_classes": 1,
                             "verify_camera_shadows": True, "pose_surroundings": True,

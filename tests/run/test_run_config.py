@@ -77,9 +77,10 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     assert p.pose_surroundings and not c.pose_surroundings  # not measured on the catalogue
     assert p.verify_camera_shadows and not c.verify_camera_shadows  # not measured on the catalogue
     assert p.parts.view_gaps and c.parts.view_gaps  # part gaps learnt from the views in both
-    assert p.parts == c.parts and p.parts.max_parts == 4  # a gate valve's fourth fragment (the catalogue)
+    assert p.parts.max_parts == c.parts.max_parts == 4  # a gate valve's fourth fragment (the catalogue)
+    assert p.parts.detected_parts and not c.parts.detected_parts  # measured with seabed only
     assert p.pose.n_candidates == 256 and c.pose.n_candidates == 96  # upright: 1296 orientations per up ranked
-    assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose,
+    assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose, parts=c.parts,
                                pose_surroundings=False, verify_camera_shadows=False) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
