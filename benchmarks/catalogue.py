@@ -86,10 +86,11 @@ CONFIGS = {
     "catalogue_border_floor": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                "size_reference": "principal", "parts": PartsConfig(), "verify_visibility_image": "border",
                                "verify_max_plane_penetration_m": 0.01},
-    # + part gaps learnt from the database views: the `cluttered` preset since 2026-12-05; four-part unions since
-    # 2026-12-06 (session 22)
+    # + part gaps learnt from the database views: the `cluttered` preset since 2026-12-05; four-part unions with
+    # recognised clusters among the parts since 2026-12-06 (session 22)
     "catalogue_border_floor_gaps": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                                    "size_reference": "principal", "parts": PartsConfig(view_gaps=True, max_parts=4),
+                                    "size_reference": "principal",
+                                    "parts": PartsConfig(view_gaps=True, max_parts=4, detected_parts=True),
                                     "verify_visibility_image": "border", "verify_max_plane_penetration_m": 0.01},
     "catalogue_border_floor_next": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                     "size_reference": "principal", "parts": PartsConfig(),

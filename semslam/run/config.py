@@ -150,9 +150,11 @@ PRESETS: dict[str, dict] = {
     # verified against the scene, sizes along principal axes, part-based unions, no posed object more than 10 mm
     # inside the floor it lies on (a rock posed as a fitting: clutter accepted 2.2-8.5 % -> 0-0.5 %), parts unioned
     # across the gaps the class's own views show (a wet-mate receptacle's cap and flange 8 cm apart), up to four
-    # clusters per union (a gate valve in four pieces)
+    # clusters per union (a gate valve in four pieces), recognised clusters among them (a gate valve's body alone
+    # verifies as a blind flange)
     "cluttered": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
-                               "size_reference": "principal", "parts": {"view_gaps": True, "max_parts": 4},
+                               "size_reference": "principal",
+                               "parts": {"view_gaps": True, "max_parts": 4, "detected_parts": True},
                                "verify_visibility_image": "border",
                                "verify_max_plane_penetration_m": 0.01}},
     # objects resting on the seabed (their most probable resting pose, gravity from the AHRS), beside structure and
@@ -167,8 +169,7 @@ PRESETS: dict[str, dict] = {
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen). The
     # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right orientation ranked past
-    # 96 by the fit of 48 points), and a recognised cluster may be a part of a union (a gate valve's body alone
-    # verifies as a blind flange).
+    # 96 by the fit of 48 points).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                             "size_reference": "principal",

@@ -47,7 +47,7 @@ def test_cluttered_preset_is_the_catalogue_benchmarks_best_setting():
     assert got != PipelineConfig()
     assert (got.verify_min_fitness, got.verify_max_visibility, got.border, got.verify_visibility_image,
             got.size_reference, got.parts, got.verify_max_plane_penetration_m) == (
-        0.95, 0.15, "flag", "border", "principal", PartsConfig(view_gaps=True, max_parts=4), 0.01)
+        0.95, 0.15, "flag", "border", "principal", PartsConfig(view_gaps=True, max_parts=4, detected_parts=True), 0.01)
     assert load_run_config(preset="cluttered").slam_config() == SlamConfig()  # recognition only
 
 
@@ -77,10 +77,9 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     assert p.pose_surroundings and not c.pose_surroundings  # not measured on the catalogue
     assert p.verify_camera_shadows and not c.verify_camera_shadows  # not measured on the catalogue
     assert p.parts.view_gaps and c.parts.view_gaps  # part gaps learnt from the views in both
-    assert p.parts.max_parts == c.parts.max_parts == 4  # a gate valve's fourth fragment (the catalogue)
-    assert p.parts.detected_parts and not c.parts.detected_parts  # measured with seabed only
+    assert p.parts == c.parts and p.parts.max_parts == 4 and p.parts.detected_parts  # a gate valve's parts (catalogue)
     assert p.pose.n_candidates == 256 and c.pose.n_candidates == 96  # upright: 1296 orientations per up ranked
-    assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose, parts=c.parts,
+    assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose,
                                pose_surroundings=False, verify_camera_shadows=False) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
@@ -92,7 +91,7 @@ def test_a_file_overrides_its_preset_and_the_command_lines_preset_must_agree(tmp
     rc = load_run_config(f)
     p = rc.pipeline_config()
     assert rc.preset == "cluttered" and p.reject_margin == 2.0 and p.border == "flag"  # override + preset kept
-    assert p.parts == PartsConfig(max_parts=2, view_gaps=True)  # the table merged into the preset's
+    assert p.parts == PartsConfig(max_parts=2, view_gaps=True, detected_parts=True)  # merged into the preset's
     assert rc.slam_config() == SlamConfig().updated(smooth=False)
     assert rc.run.modes == ("pose", "dr") and rc.run.backend == "isam2"
     assert load_run_config(f, preset="cluttered") == rc
