@@ -113,10 +113,13 @@ class PipelineConfig:
         cluster lying on one (its nearest point within 5 cm of it) whose posed class reaches more than this behind
         it (behind a second plane, a slope or wall beside it, the depth its deepest 2 % of points reach: a corner
         clipping that plane's infinite extension does not count) is rejected (``extras["plane_penetration_m"]``):
-        the object would be inside the floor. A flat plate taken
-        for a thicker flange, top face on top face, sinks the flange by the difference (11-12.5 mm on
-        ``benchmarks/real_models.py`` seed 0, every right pose within 2.1 mm). Off (None) by default; the
-        ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs ``estimate_pose``.
+        the object would be inside the floor. A flat plate taken for a thicker flange, top face on top face, sinks
+        the flange by the difference (11-12.5 mm on ``benchmarks/real_models.py`` seed 0, every right pose within
+        2.1 mm). The pose search is told too: when its pose fails the check, it takes the best other refined
+        hypothesis whose pose passes (``estimate_object_pose(admissible=...)``), so a border-cut cluster posed too
+        deep, where its depth twin along the view lies on the floor, is posed there instead of rejected. Off (None)
+        by default; the ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs
+        ``estimate_pose``.
     verify_next_classes : int
         A cluster whose class fails hypothesis verification is tried as the next-nearest classes (the nearest view
         of each other class the rejection accepts and whose size test it passes, nearest first), up to this many;

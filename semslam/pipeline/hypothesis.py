@@ -176,6 +176,22 @@ def surroundings(seg: SegmentationResult | None, points: np.ndarray, radius_m: f
     return objects[np.sum((objects - c) ** 2, axis=1) <= reach * reach]
 
 
+def _above_floor(cfg: Any, seg: SegmentationResult | None, points: np.ndarray, model: Any):
+    """The pose search's admissibility test (``estimate_object_pose(admissible=...)``) under the floor check
+    (``verify_max_plane_penetration_m``): a pose whose model reaches no deeper behind the removed planes the cluster
+    lies on than the check allows. When the search's pose fails it, the search takes the best other refined
+    hypothesis whose pose passes (a border-cut cluster's depth twin, another orientation) instead of handing over a
+    pose the check will reject. None without the check or without a removed plane."""
+    limit = cfg.verify_max_plane_penetration_m
+    if limit is None or seg is None or not seg.planes:
+        return None
+
+    def admissible(T_scanner_object: np.ndarray) -> bool:
+        return not plane_penetration_m(seg, points, model.points_object, T_scanner_object) > limit  # NaN passes
+
+    return admissible
+
+
 def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,
                     timings: dict) -> Detection:
     """The detection of ``hyp``: its pose (unless ``estimate_pose`` is off), covariance and reliability, stamped
@@ -203,7 +219,7 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object
                                 is not None else None, up_object=up_object, partial=bool(hyp.touches_border),
                                 surroundings_scanner=surroundings(seg, points, model.radius_m)
-                                if cfg.pose_surroundings else None)
+                                if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model))
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

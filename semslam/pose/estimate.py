@@ -36,7 +36,8 @@ from .covariance import calibration_of, pose_covariance, widen_untrusted
 from .icp_refine import (  # noqa: F401 (_final_score, _icp_field_nearest: tests use them here)
     _final_score, _final_scores, _icp_field_nearest, _icp_small_gicp, _refine, _small_gicp_T, back_facing_shares)
 from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
-from .search import DEPTH_TWIN_MIN_M, rotation_distances, search_hypotheses
+from .search import search_hypotheses
+from .selection import admissible_alternative, choose_hypothesis, margin_and_alternatives
 
 __all__ = ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "pose_verdict", "prepare_pose_model",
            "back_facing_shares"]
@@ -128,6 +129,7 @@ def estimate_object_pose(
     up_object: Any = None,
     partial: bool = False,
     surroundings_scanner: Any = None,
+    admissible: Any = None,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -168,6 +170,8 @@ def estimate_object_pose(
     surroundings_scanner : array-like (K, 3), optional
         The scan's other objects about the cluster: seen surfaces for the grid search's visibility term (not for
         the verdict's), ``PipelineConfig.pose_surroundings``: an object split in two is not posed to hide a part.
+    admissible : callable, optional
+        A test of ``T_scanner_object`` (4, 4) -> bool (the floor check): see :func:`.selection.admissible_alternative`.
 
     Returns
     -------
@@ -189,17 +193,20 @@ def estimate_object_pose(
     cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
     t1 = time.perf_counter()
     alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
-                               *_checked_search_inputs(partial, surroundings_scanner))
+                               *_checked_search_inputs(partial, surroundings_scanner, admissible))
     return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
 
 
-def _checked_search_inputs(partial: Any, surroundings_scanner: Any) -> tuple[bool, np.ndarray | None]:
-    """``partial`` as a bool and ``surroundings_scanner`` as an (K, 3) array (or None), checked."""
+def _checked_search_inputs(partial: Any, surroundings_scanner: Any, admissible: Any) -> tuple:
+    """``partial`` as a bool, ``surroundings_scanner`` as an (K, 3) array (or None) and ``admissible``, checked."""
     if not isinstance(partial, (bool, np.bool_)):
         raise InputError(f"The 'partial' argument of {_CALLER} must be true or false. Got {partial!r} instead.")
+    if admissible is not None and not callable(admissible):
+        raise InputError(f"The 'admissible' argument of {_CALLER} must be a function of a 4x4 pose or None. "
+                         f"Got {type(admissible).__name__} instead.")
     surroundings = None if surroundings_scanner is None else \
         as_float_array("surroundings_scanner", surroundings_scanner, (None, 3), caller=_CALLER)
-    return bool(partial), surroundings
+    return bool(partial), surroundings, admissible
 
 
 @dataclass
@@ -245,7 +252,7 @@ def _checked_cluster(
 
 def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
                    init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False,
-                   surroundings: np.ndarray | None = None) -> _Alignment:
+                   surroundings: np.ndarray | None = None, admissible: Any = None) -> _Alignment:
     """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
     the grid search with ICP of its best hypotheses (the default)."""
     nan = float("nan")
@@ -273,7 +280,7 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
     fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial,
-                                                          surroundings)
+                                                          surroundings, admissible)
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 
 
@@ -302,7 +309,7 @@ def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Sy
 
 
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None,
-                 partial: bool = False, surroundings: np.ndarray | None = None):
+                 partial: bool = False, surroundings: np.ndarray | None = None, admissible=None):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -351,17 +358,19 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     refined = [(fit + cfg.visibility_weight * vis + cfg.back_facing_weight * b, fit, vis, T, h)
                for (fit, vis), T, h, b in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps, back)]
     refined.sort(key=lambda x: x[0])
-    # a depth twin (search._depth_twin) is never chosen and leaves the margin alone: it widens the covariance only
-    best = next((r for r in refined if not r[4].depth_twin), refined[0])
-    nearest = None
-    if field_icp:
-        final, nearest = _icp_field_nearest(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
-    else:
-        final = _icp_small_gicp(cluster, model, cfg, best[3], cfg.icp_max_correspondence_m)
-    margin, distinct = _margin_and_alternatives(refined, best, sym)
+    # a depth twin (search._depth_twin) widens the covariance only, unless the pose is inadmissible (selection.py)
+    best, judged = choose_hypothesis(refined)
+    final, nearest = _final_icp(cluster, model, cfg, best[3], field_icp)
+    if admissible is not None and not admissible(np.linalg.inv(final.T_target_source.matrix)):
+        alt = admissible_alternative(refined, best, admissible)
+        other = _final_icp(cluster, model, cfg, alt[0][3], field_icp) if alt is not None else None
+        if other is not None and admissible(np.linalg.inv(other[0].T_target_source.matrix)):
+            (best, judged), (final, nearest) = alt, other
+    margin, distinct = margin_and_alternatives(judged, best, sym)
     extras = {"coarse_fitness": 1.0 - best[4].fit, "score": best[0], "fit_cost": best[1],
               "n_hypotheses": len(rotations), "search_points": len(pts), "upright": upright is not None,
               "hypotheses": [(float(s), float(f), float(v)) for s, f, v, _, _ in refined],
+              "inadmissible_hypotheses": len(refined) - len(judged),
               # for the covariance's hypothesis spread (popped by estimate_object_pose)
               "_alternatives": distinct}
     # the verdict's visibility is the cluster's own: the surroundings choose between the hypotheses, they do not make
@@ -371,27 +380,12 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     return final, vis, margin, extras, t2, nearest
 
 
-def _margin_and_alternatives(refined: list, best: tuple, sym: Symmetry) -> tuple[float, list]:
-    """The score margin of ``best`` among the ``refined`` hypotheses (``(score, fit, vis, T_object_scanner,
-    Hypothesis)`` each): the least score difference to one not equivalent to it (> 10 degrees modulo the symmetry or
-    > 1 cm away; inf when none), and those hypotheses as ``(score difference, T)`` pairs, the covariance's spread. A
-    depth twin more than :data:`DEPTH_TWIN_MIN_M` away is in the spread (its difference at least 0), not the margin."""
-    Tb = best[3]
-    margin = float("inf")
-    distinct = []
-    for other in refined:
-        To = other[3]
-        if other is best:
-            continue
-        rot = rotation_distances(Tb[:3, :3], To[None, :3, :3], sym)[0]
-        # positions of the object origin in the scanner frame
-        dt = np.linalg.norm(Tb[:3, :3].T @ Tb[:3, 3] - To[:3, :3].T @ To[:3, 3])
-        if other[4].depth_twin and dt > DEPTH_TWIN_MIN_M:
-            distinct.append((max(float(other[0] - best[0]), 0.0), To))
-        elif rot > np.radians(10.0) or dt > 0.01:
-            margin = min(margin, other[0] - best[0])
-            distinct.append((float(other[0] - best[0]), To))
-    return margin, distinct
+def _final_icp(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray, field_icp: bool):
+    """The final ICP of the whole cluster from ``T_os`` (``T_object_scanner``): the RegistrationResult and the
+    nearest model points of :func:`_icp_field_nearest` (None with small_gicp)."""
+    if field_icp:
+        return _icp_field_nearest(cluster, model, cfg, T_os, cfg.icp_max_correspondence_m)
+    return _icp_small_gicp(cluster, model, cfg, T_os, cfg.icp_max_correspondence_m), None
 
 
 def _cluster_visibility(pts: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, T_os: np.ndarray,

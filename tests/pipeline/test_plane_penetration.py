@@ -153,3 +153,21 @@ def test_a_corner_clipping_a_second_removed_plane_beside_the_object_is_not_a_sin
     assert plane_penetration_m(first, top, disc, pose) == pytest.approx(0.011, abs=5e-4)
     sunk = _pose(FLOOR_Z + 0.010)  # the same disc 10 mm into the floor: its whole underside
     assert plane_penetration_m(seg, top, disc, sunk) == pytest.approx(0.010, abs=1e-3)
+
+
+def test_the_pose_search_is_told_that_a_pose_inside_the_floor_is_inadmissible(scene):
+    """Catches the floor check applied only after the pose is chosen (a border-cut cluster posed sunk into the floor
+    rejected while its depth twin lay on it, benchmarks/catalogue.py): the admissibility test handed to
+    ``estimate_object_pose`` fails the sunk pose and passes the right one; no test without the check or a plane."""
+    from types import SimpleNamespace
+
+    from semslam.pipeline.hypothesis import _above_floor
+
+    seg, cluster = scene
+    model = SimpleNamespace(points_object=_slab(0.12, 0.012))
+    admissible = _above_floor(PipelineConfig(verify_max_plane_penetration_m=0.01), seg, cluster, model)
+    assert admissible(_pose(FLOOR_Z)) and admissible(_pose(FLOOR_Z + 0.008))
+    assert not admissible(_pose(FLOOR_Z + 0.012))
+    assert not admissible(_pose(FLOOR_Z + 0.05))
+    assert _above_floor(PipelineConfig(), seg, cluster, model) is None
+    assert _above_floor(PipelineConfig(verify_max_plane_penetration_m=0.01), None, cluster, model) is None

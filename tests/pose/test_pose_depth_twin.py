@@ -116,3 +116,31 @@ def test_a_pose_search_without_the_twin_gives_the_same_pose(plate, monkeypatch):
     without = estimate_object_pose(pts, model, partial=True)
     assert np.array_equal(est.T_scanner_object.matrix, without.T_scanner_object.matrix)
     assert np.linalg.norm(est.T_scanner_object.matrix[:3, 3] - T[:3, 3]) < 0.004
+
+
+def test_an_inadmissible_best_gives_way_to_its_admissible_twin(plate, monkeypatch):
+    """Catches a border-cut cluster posed where it cannot be (inside the floor it lies on: the pipeline's floor
+    check, ``estimate_object_pose(admissible=...)``) while its depth twin fits as well where it can: here the lifted
+    plate is the search's best and an admissibility test that refuses poses lifted towards the sensor leaves the
+    twin, the plate where it lies; refused, the lifted pose is out of the margin and the spread too."""
+    model, T, pts, view = plate
+    _lifted_first(monkeypatch, with_twin=True)
+    plain = estimate_object_pose(pts, model, partial=True)
+    assert (plain.T_scanner_object.matrix[:3, 3] - T[:3, 3]) @ view > 0.008  # lifted: the search's best
+
+    def not_lifted(T_scanner_object):
+        return (T_scanner_object[:3, 3] - T[:3, 3]) @ view < 0.006
+
+    est = estimate_object_pose(pts, model, partial=True, admissible=not_lifted)
+    assert np.linalg.norm(est.T_scanner_object.matrix[:3, 3] - T[:3, 3]) < 0.004  # the twin: the plate where it lies
+    assert est.extras["inadmissible_hypotheses"] == 1 and plain.extras["inadmissible_hypotheses"] == 0
+    nothing = estimate_object_pose(pts, model, partial=True, admissible=lambda T_so: False)
+    assert np.array_equal(nothing.T_scanner_object.matrix, plain.T_scanner_object.matrix)  # none: as without
+
+
+def test_a_pose_search_refuses_an_admissibility_test_that_is_not_a_function(plate):
+    from semslam.errors import InputError
+
+    model, _, pts, _ = plate
+    with pytest.raises(InputError, match="'admissible' argument of estimate_object_pose"):
+        estimate_object_pose(pts, model, partial=True, admissible=0.01)
