@@ -11,6 +11,11 @@ them when ``runs/demo`` has none)::
     .venv/bin/python benchmarks/latency.py --only cold
     .venv/bin/python benchmarks/latency.py --only cold --cold-scans 1 10 15 17 25 --cold-repeat 5 --cold-cache empty
 
+The cold table ends with the floor under any such command: a fresh Python that imports numpy, scipy.spatial and
+numba and calls one cached numba kernel (numba's first call sets up its compiler and typing registries). The
+children run with Python's bytecode cache on, as an installed package has it (``--no-bytecode`` keeps the parent's
+``PYTHONDONTWRITEBYTECODE``: every run then compiles semslam's sources again).
+
 Every figure is printed with the machine's load average (``os.getloadavg``): the latencies are only
 comparable at a similar load.
 """
@@ -102,17 +107,19 @@ def cold(args) -> None:
 
     run = Path(args.run)
     exe = str(Path(sys.executable).with_name("semslam"))
+    base_env = _child_env(args.no_bytecode)
     print(f"\n## Cold `semslam recognize SCAN --db {run / 'db.npz'} --json` (fresh process, {args.cold_repeat} runs, "
-          f"distance-field cache {args.cold_cache})\n")
+          f"distance-field cache {args.cold_cache}, bytecode cache "
+          f"{'off' if base_env.get('PYTHONDONTWRITEBYTECODE') else 'on'})\n")
     print("| scan | detections | load (first run) | wall best / median s | CPU best / median s | "
           "load_db + recognize best / median ms | best run's timings_ms |")
     print("|---|---|---|---:|---:|---:|---|")
     for sid in args.cold_scans:
         scan = run / "mission" / "scans" / f"scan_{sid:05d}.pcd"
         cmd = [exe, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"]
-        env = dict(os.environ)
+        env = dict(base_env)
         if args.cold_cache == "warm":
-            subprocess.run(cmd, check=True, capture_output=True)
+            subprocess.run(cmd, check=True, capture_output=True, env=env)
         rows, load0 = [], _load()
         for _ in range(args.cold_repeat):
             empty = tempfile.mkdtemp(prefix="semslam_cold_") if args.cold_cache == "empty" else None
@@ -136,6 +143,45 @@ def cold(args) -> None:
         print(f"| {sid} | {best[4]} | {load0} | {walls.min():.2f} / {np.median(walls):.2f} | "
               f"{cpus.min():.2f} / {np.median(cpus):.2f} | {inproc.min():.0f} / {np.median(inproc):.0f} | "
               + ", ".join(f"{k} {v:.0f}" for k, v in best[3].items()) + " |")
+    _floor(args.cold_repeat, base_env)
+
+
+_FLOOR_KERNEL = '''import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def total(x):
+    return x.sum()
+'''
+
+
+def _floor(repeat: int, env: dict) -> None:
+    """The floor row: fresh processes that import numpy, scipy.spatial and numba and call one cached kernel."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="semslam_floor_") as tmp:
+        Path(tmp, "floor_kernel.py").write_text(_FLOOR_KERNEL)
+        cmd = [sys.executable, "-c", "import numpy, scipy.spatial, numba, floor_kernel; "
+               "floor_kernel.total(numpy.ones(3))"]
+        env = dict(env, PYTHONPATH=tmp)
+        subprocess.run(cmd, check=True, env=env, cwd=tmp)  # fills numba's cache
+        load0, walls, cpus = _load(), [], []
+        for _ in range(repeat):
+            t0, cpu0 = time.perf_counter(), _children_cpu_s()
+            subprocess.run(cmd, check=True, env=env, cwd=tmp)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(_children_cpu_s() - cpu0)
+    print(f"| floor: `import numpy, scipy.spatial, numba` + one cached kernel | - | {load0} | "
+          f"{min(walls):.2f} / {np.median(walls):.2f} | {min(cpus):.2f} / {np.median(cpus):.2f} | - | - |")
+
+
+def _child_env(no_bytecode: bool) -> dict:
+    """The cold runs' environment: the parent's, with Python's bytecode cache on unless ``no_bytecode``."""
+    env = dict(os.environ)
+    if not no_bytecode:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
 
 
 def _children_cpu_s() -> float:
@@ -157,6 +203,8 @@ def main() -> None:
     ap.add_argument("--cold-repeat", type=int, default=3)
     ap.add_argument("--cold-cache", choices=("warm", "empty"), default="warm",
                     help="the distance-field cache of the cold runs: filled by a first run, or empty for every run")
+    ap.add_argument("--no-bytecode", action="store_true",
+                    help="keep the parent's PYTHONDONTWRITEBYTECODE in the cold runs (default: bytecode cache on)")
     args = ap.parse_args()
     if args.only in (None, "warm"):
         warm(args)
