@@ -359,7 +359,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
                for (fit, vis), T, h, b in zip(_final_scores(cluster, image, model, cfg, Ts), Ts, hyps, back)]
     refined.sort(key=lambda x: x[0])
     # a depth twin (search._depth_twin) widens the covariance only, unless the pose is inadmissible (selection.py)
-    best, judged = choose_hypothesis(refined)
+    best, judged = choose_hypothesis(refined), refined
     final, nearest = _final_icp(cluster, model, cfg, best[3], field_icp)
     if admissible is not None and not admissible(np.linalg.inv(final.T_target_source.matrix)):
         alt = admissible_alternative(refined, best, admissible)

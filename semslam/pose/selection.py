@@ -16,10 +16,10 @@ from .search import DEPTH_TWIN_MIN_M, rotation_distances
 __all__ = ["admissible_alternative", "choose_hypothesis", "margin_and_alternatives"]
 
 
-def choose_hypothesis(refined: list) -> tuple[tuple, list]:
-    """The chosen hypothesis of the ``refined`` ones (sorted by score) and the ones it is judged against: the best
-    that is not a depth twin (:func:`.search._depth_twin` only widens the covariance), judged against all."""
-    return next((r for r in refined if not r[4].depth_twin), refined[0]), refined
+def choose_hypothesis(refined: list) -> tuple:
+    """The chosen hypothesis of the ``refined`` ones (sorted by score): the best that is not a depth twin
+    (:func:`.search._depth_twin` only widens the covariance)."""
+    return next((r for r in refined if not r[4].depth_twin), refined[0])
 
 
 def admissible_alternative(refined: list, best: tuple, admissible: Callable[[np.ndarray], bool]) -> tuple | None:
