@@ -29,8 +29,11 @@ Database (``--db-sensor``): ``kinect`` (default) = Kinect-like survey views at 1
 45/60/75/85 deg; ``laser`` = views rendered by the missions' own laser scanner from route-like viewpoints
 (:mod:`semslam.simulation.laser_views`: altitude 1.4-1.6 m, cross-track offset up to 0.45 m, anywhere along the
 sweep, vehicle motion during the scan; ``--laser-views`` whole views per class, ``--laser-cut-views`` extra views
-the swath's border may cut); ``kinect+laser`` both. The pose-model views are the Kinect ones (0.7 m, 60 deg) in
-every case. ``--reject-margin`` overrides the settings' rejection margin (6, set for the Kinect-to-laser gap).
+the swath's border may cut): the database ``semslam db build --models DIR --vehicle V.toml`` builds with the
+missions' scanner (:func:`~semslam.simulation.model_database.sensor_database`, its defaults: 48 + 16 views, 16
+pose-model views, the scanner's camera recorded for verification); ``kinect+laser`` both. The pose-model views are
+Kinect ones (0.7 m, 60 deg) in every case. ``--reject-margin`` overrides the settings' rejection margin (6, set
+for the Kinect-to-laser gap).
 
 Recall is counted per cluster (every cluster of a database object, including those cut by the scan border);
 also printed: recall over the clusters not cut by the border, and per object (found in at least one scan).
@@ -62,7 +65,7 @@ from semslam.simulation.cad_models import models_view_clouds, with_resting_up
 from semslam.simulation.catalogue import catalogue_objects
 from semslam.simulation.kinect import POSE_MODEL_KINECT, SURVEY_KINECT
 from semslam.simulation.laser_views import LaserViewConfig
-from semslam.simulation.model_database import sensor_view_clouds
+from semslam.simulation.model_database import LASER_CUT_VIEWS, LASER_VIEWS, sensor_database, sensor_view_clouds
 from semslam.simulation.occlusion import occlude_objects
 from semslam.segmentation import SegmentationConfig
 
@@ -115,7 +118,8 @@ def subsets(labels: list[str], size: int = 4) -> list[list[str]]:
 
 
 def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, *, sensor: str = "kinect",
-             laser_views: int = 48, laser_cut_views: int = 0, laser_config: LaserViewConfig | None = None):
+             laser_views: int = LASER_VIEWS, laser_cut_views: int = LASER_CUT_VIEWS,
+             laser_config: LaserViewConfig | None = None):
     """The recognition views + the pose-model views (Kinect, 0.7 m / 60 deg, as always).
 
     ``sensor``: ``"kinect"`` survey views at each elevation (1.5 m, ``n_views`` azimuths each); ``"laser"`` views
@@ -130,6 +134,9 @@ def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, 
             cfg = dataclasses.replace(SURVEY_KINECT, elevation_rad=float(np.radians(el)))
             v, classes = models_view_clouds(models, seed=seed + i, config=cfg, n_views=n_views)
             views += [(lab, f"{vid}_el{el:g}", cloud) for lab, vid, cloud in v]
+    if sensor == "laser":  # the database `semslam db build --models DIR --vehicle V.toml` builds, on the user's path
+        return sensor_database(models, sensor="laser", seed=seed, laser=laser_config, laser_views=laser_views,
+                               laser_cut_views=laser_cut_views)
     if "laser" in sensor:  # as semslam db build --sensor laser renders them
         v, classes = sensor_view_clouds(models, sensor="laser", seed=seed, laser=laser_config, laser_views=laser_views,
                                         laser_cut_views=laser_cut_views)
@@ -266,8 +273,9 @@ def main(argv=None) -> None:
     ap.add_argument("--db-sensor", default="kinect", choices=("kinect", "laser", "kinect+laser"),
                     help="recognition views of the database: Kinect-like survey views (default), views rendered by "
                          "the missions' laser scanner from route-like viewpoints, or both")
-    ap.add_argument("--laser-views", type=int, default=48, help="with --db-sensor *laser: whole views per class")
-    ap.add_argument("--laser-cut-views", type=int, default=0,
+    ap.add_argument("--laser-views", type=int, default=LASER_VIEWS,
+                    help="with --db-sensor *laser: whole views per class")
+    ap.add_argument("--laser-cut-views", type=int, default=LASER_CUT_VIEWS,
                     help="with --db-sensor *laser: extra views per class that the swath's border may cut")
     ap.add_argument("--descriptor", default="esf+vfh", choices=("esf", "vfh", "esf+vfh"),
                     help="descriptor of the main tables and headlines (default esf+vfh, the pipeline's)")

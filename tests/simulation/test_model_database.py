@@ -124,3 +124,22 @@ def test_db_build_with_a_vehicle_file_renders_its_laser(tmp_path, capsys):
                  "--out", str(tmp_path / "y.npz")]) == 1
     err = capsys.readouterr().err
     assert "missing.toml" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_catalogue_benchmarks_laser_database_is_the_one_db_build_makes(tee):
+    """benchmarks/catalogue.py --db-sensor laser measures the user's database (session 24: it had built its own,
+    without border-cut views, with 8 pose-model views and no scanner camera)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "catalogue.py"
+    spec = importlib.util.spec_from_file_location("catalogue_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    ours = bench.build_db(tee, 3, sensor="laser", laser_views=2, laser_cut_views=1)
+    users = sensor_database(tee, sensor="laser", seed=3, laser_views=2, laser_cut_views=1)
+    assert list(ours.view_ids) == list(users.view_ids) and any("_cut" in str(v) for v in ours.view_ids)
+    assert np.array_equal(ours.esf, users.esf) and np.array_equal(ours.points_xyz_m, users.points_xyz_m)
+    assert ours.scanner_camera_xyz_m == users.scanner_camera_xyz_m is not None
+    assert np.array_equal(ours.model_points_xyz_m, users.model_points_xyz_m)
+    assert len(ours.model_labels) == len(users.model_labels) > 8  # 16 pose-model views (or both rests' 2 x 8)
