@@ -41,6 +41,10 @@ class Hypothesis:
         The nearest-view match (its distance is the detection's score).
     touches_border : bool
         The points are cut by the scan's border (the pose is then marked unreliable).
+    union : bool
+        The points are a union of clusters (:mod:`semslam.pipeline.parts`): a part of the object may be missing or
+        elsewhere, so, like a border-cut cluster, the pose search also starts the translation on a grid across the
+        object (``estimate_object_pose(partial=True)``, ``PoseConfig.partial_start_step_m``).
     """
 
     raw_idx: np.ndarray
@@ -49,6 +53,7 @@ class Hypothesis:
     view_index: int
     match: Any
     touches_border: bool = False
+    union: bool = False
 
 
 def verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None,
@@ -217,7 +222,8 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
     extras["pose_upright"] = up_object is not None
     pose = estimate_object_pose(points, model, symmetry=info.symmetry, config=cfg.pose, seed=seed,
                                 viewpoint_xyz_m=scan.viewpoint_xyz_m, up_scanner=up_scanner if up_object
-                                is not None else None, up_object=up_object, partial=bool(hyp.touches_border),
+                                is not None else None, up_object=up_object,
+                                partial=bool(hyp.touches_border or hyp.union),
                                 surroundings_scanner=surroundings(seg, points, model.radius_m)
                                 if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model))
     timings["pose"] += (time.perf_counter() - t0) * 1e3

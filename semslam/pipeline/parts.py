@@ -296,7 +296,8 @@ def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clus
         raw = [_input_indices(seg, k) for k in ks]
         raw_idx = np.sort(np.concatenate(raw))
         border = any(outcomes[k].touches_border for k in ks)
-        det = pose_and_verify(rec, ctx, seg, Hypothesis(raw_idx, cloud, label, view_index, match, border),
+        hyp = Hypothesis(raw_idx, cloud, label, view_index, match, border, union=True)
+        det = pose_and_verify(rec, ctx, seg, hyp,
                               seed=seed + u, timings=timings, what=f"union {ks}",
                               scene_visibility_cost=pcfg.scene_visibility)
         if det is None:

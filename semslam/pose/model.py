@@ -56,7 +56,8 @@ class PoseConfig:
     #: models (benchmarks/history/real-models.md, session 15): recall +0.9 points held out, but the pose NEES
     #: 6.3 -> 21: the shadows explain the misses of the large wheel valve, and leave its half-turn undecided.
     camera_offset_m: tuple | None = None
-    #: Translation starts of a partial cluster (cut by the scan's border: ``estimate_object_pose(partial=True)``):
+    #: Translation starts of a partial cluster (cut by the scan's border, or a union of clusters:
+    #: ``estimate_object_pose(partial=True)``):
     #: besides the centroid rules, a grid of this spacing across the object's radius, across the view (twice it
     #: along the view: :func:`.search._partial_offsets`). A strip of a flange's rim has its centroid ~10 cm from
     #: where the whole view's centroid would be, beyond the 3 cm that the translation steps pull in. 0 (default):

@@ -165,7 +165,8 @@ PRESETS: dict[str, dict] = {
     # A cluster whose nearest class fails verification is tried as the next one (a strip of the 12 mm valve-panel
     # base, nearer the flange's face than the plate's: the flange 15 mm in the floor, the plate verifies); a
     # border-cut cluster's translation searched across the object (a strip of a flange's rim: its centroid ~10 cm
-    # from the whole view's). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
+    # from the whole view's; a union of clusters is searched the same way, since 2026-12-06: benchmarks/history/
+    # catalogue.md, session 24). The pose search counts the scan's other clusters about a cluster as seen surfaces (a
     # handwheel split at its spokes, half of it posed half-turned with a confident covariance). With a laser database
     # verification also allows for the scanner camera's shadows (a wheel valve on its rim, only its top seen). The
     # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right orientation ranked past
