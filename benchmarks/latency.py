@@ -2,8 +2,8 @@
 warm (the recognizer prepared as the demo does it, the first scan dropped), and the wall time of a cold
 single-scan ``semslam recognize SCAN --db DB`` (a fresh process: best of N) with its ``timings_ms``.
 
-Run from the repository root (the demo's mission and database; ``semslam demo --quick --out DIR`` makes
-them when ``runs/demo`` has none)::
+Run from the repository root, on the demo's mission and database (``make demo`` or ``semslam demo --quick --out
+DIR`` makes them; without them the script stops and says so)::
 
     .venv/bin/python benchmarks/latency.py                                   # runs/demo, warm + cold
     .venv/bin/python benchmarks/latency.py --run runs/demo --repeat 3 --cold-scans 10 40
@@ -206,6 +206,10 @@ def main() -> None:
     ap.add_argument("--no-bytecode", action="store_true",
                     help="keep the parent's PYTHONDONTWRITEBYTECODE in the cold runs (default: bytecode cache on)")
     args = ap.parse_args()
+    run = Path(args.run)
+    if not ((run / "db.npz").is_file() and (run / "mission").is_dir()):
+        ap.error(f"--run {run} holds no demo run (mission/ and db.npz): run `make demo` first, or "
+                 f"`semslam demo --quick --out {run}`")
     if args.only in (None, "warm"):
         warm(args)
     if args.only in (None, "cold"):
