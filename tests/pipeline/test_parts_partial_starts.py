@@ -42,11 +42,24 @@ def test_a_union_is_searched_as_a_partial_view_and_a_single_cluster_is_not(world
     parts = [len(result.segmentation.input_indices(k)) for k in range(len(result.clusters))]
     assert len(parts) == 2
     union = [partial for n, partial in calls if n == sum(parts)]
-    alone = [partial for n, partial in calls if n in parts]
     assert union and all(union), (parts, calls)  # the union: a partial view
-    assert not any(alone), (parts, calls)  # a whole cluster not cut by the border: not partial
     # with the grid the union still finds the true pose (the identity)
     assert [c.label for c in result.clusters] == ["dumbbell", "dumbbell"]
     det = result.detections[0]
     assert np.linalg.norm(det.T_sensor_object.translation_m) < 0.01
     assert np.degrees(np.arccos(np.clip((np.trace(det.T_sensor_object.rotation) - 1) / 2, -1, 1))) < 3.0
+
+
+
+def test_a_single_cluster_is_not_searched_as_a_partial_view(monkeypatch):
+    """The dumbbell's box alone verifies as the 'block' of test_pipeline_parts_detected's database: one whole
+    cluster, posed as a whole view."""
+    from .test_pipeline_parts_detected import dumbbell_and_block
+
+    dumbbell, db = dumbbell_and_block()
+    scan, _ = _scene(dumbbell, AZIMUTHS[0])
+    calls, result = _recognize_spying(db, scan, 0.04, monkeypatch)
+    assert sorted(c.label for c in result.clusters) == ["block", "unknown"]
+    block = [len(result.segmentation.input_indices(k)) for k, c in enumerate(result.clusters) if c.label == "block"]
+    posed = [partial for n, partial in calls if n == block[0]]
+    assert posed and not any(posed), calls

@@ -21,6 +21,10 @@ from .test_pipeline_parts import AZIMUTHS, VERIFY, _scene
 
 @pytest.fixture(scope="module")
 def world():
+    return dumbbell_and_block()
+
+
+def dumbbell_and_block():
     """The dumbbell of test_pipeline_parts and the same box alone, in one database."""
     from semslam.recognition import build_database
 
