@@ -165,9 +165,8 @@ def estimate_object_pose(
         the orientations keeping any of them up are scanned, and a near-equal fit of another one makes the
         pose ambiguous.
     partial : bool
-        The cluster is part of what the scanner could have seen (cut by the scan's border, or a union of clusters
-        the pipeline tries as one object): the grid search also starts the translation on a grid across the object
-        (``PoseConfig.partial_start_step_m``; off at 0).
+        Only part of the object (cut by the scan's border, or a union of clusters): the grid search also starts
+        the translation on a grid across the object (``PoseConfig.partial_start_step_m``; off at 0).
     surroundings_scanner : array-like (K, 3), optional
         The scan's other objects about the cluster: seen surfaces for the grid search's visibility term (not for
         the verdict's), ``PipelineConfig.pose_surroundings``: an object split in two is not posed to hide a part.
