@@ -125,7 +125,10 @@ def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, 
     ``sensor``: ``"kinect"`` survey views at each elevation (1.5 m, ``n_views`` azimuths each); ``"laser"`` views
     rendered by the missions' laser scanner from route-like viewpoints (:mod:`semslam.simulation.laser_views`:
     ``laser_views`` whole views per class, headings every 360 / laser_views degrees, plus ``laser_cut_views``
-    views that the swath's border may cut); ``"kinect+laser"`` both."""
+    views that the swath's border may cut), the database ``semslam db build --models DIR --vehicle V.toml`` makes
+    (:func:`~semslam.simulation.model_database.sensor_database`: 16 pose-model views, the scanner's camera
+    recorded); ``"kinect+laser"`` both, the survey elevations of this benchmark beside the same laser views (8
+    pose-model views, no camera: not a database ``db build`` makes)."""
     if sensor not in ("kinect", "laser", "kinect+laser"):
         raise ValueError(f"sensor must be kinect, laser or kinect+laser, got {sensor!r}")
     views, classes = [], None
@@ -137,7 +140,7 @@ def build_db(models: dict, seed: int, elevations_deg=(75.0,), n_views: int = 8, 
     if sensor == "laser":  # the database `semslam db build --models DIR --vehicle V.toml` builds, on the user's path
         return sensor_database(models, sensor="laser", seed=seed, laser=laser_config, laser_views=laser_views,
                                laser_cut_views=laser_cut_views)
-    if "laser" in sensor:  # as semslam db build --sensor laser renders them
+    if "laser" in sensor:  # kinect+laser: the laser views as sensor_database renders them
         v, classes = sensor_view_clouds(models, sensor="laser", seed=seed, laser=laser_config, laser_views=laser_views,
                                         laser_cut_views=laser_cut_views)
         views += v
