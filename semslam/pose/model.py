@@ -322,7 +322,22 @@ def _rotation_hierarchy(n_fine: int, n_coarse: int) -> RotationHierarchy:
 
 
 def _oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Voxelised points of every view with normals oriented outwards (towards the view's viewpoint)."""
+    """Voxelised points of every view with normals oriented outwards (towards the view's viewpoint), through the
+    on-disk cache (:mod:`semslam._cache`): on a database of 16 laser views per class (~380 000 points) they are
+    ~0.1 s of every class's first pose in a fresh process."""
+    from .._cache import cached_arrays
+
+    key: list = [float(leaf_m), float(radius_m), len(views)]
+    for pts, vp, given in views:
+        key += [pts, "no viewpoint" if vp is None else np.asarray(vp, dtype=float),
+                "no normals" if given is None else given]
+    out = cached_arrays("oriented_samples_v1", key,
+                        lambda: dict(zip(("points", "normals"), _build_oriented_samples(views, leaf_m, radius_m))))
+    return out["points"], out["normals"]
+
+
+def _build_oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_oriented_samples` computed."""
     from ..descriptors import estimate_normals
     from ..segmentation.voxel import voxel_downsample
 

@@ -120,6 +120,17 @@ def loo_same_class_distances(X: np.ndarray, y: np.ndarray, same_viewpoint: np.nd
     return nearest
 
 
+def _cached_loo_distances(X: np.ndarray, y: np.ndarray, same_viewpoint: np.ndarray | None) -> np.ndarray:
+    """:func:`loo_same_class_distances` through the on-disk cache (:mod:`semslam._cache`): the (n, n) distance
+    matrix behind it is most of a cold start's work on a user's database (832 views: ~0.5 s), and it depends on
+    the database alone."""
+    from .._cache import cached_arrays
+
+    key = [X, y.astype("U"), "all" if same_viewpoint is None else same_viewpoint]
+    return cached_arrays("rejection_loo_v1", key,
+                         lambda: {"nearest": loo_same_class_distances(X, y, same_viewpoint)})["nearest"]
+
+
 def calibrate_rejection(X: Any, y: Any, *, quantile: float = 0.95, margin: float = 1.0,
                         mode: str = "global", min_class_views: int = 4, view_directions: Any = None,
                         min_view_separation_deg: float = 10.0) -> RejectionThresholds:
@@ -169,7 +180,7 @@ def calibrate_rejection(X: Any, y: Any, *, quantile: float = 0.95, margin: float
             raise RecognitionError(f"The 'view_directions' argument of {caller} must have shape ({len(y)}, 3). "
                                    f"Got {V.shape} instead.")
         same_viewpoint = same_viewpoint_pairs(V, min_view_separation_deg)
-    d = loo_same_class_distances(X, y, same_viewpoint)
+    d = _cached_loo_distances(X, y, same_viewpoint)
     finite = d[np.isfinite(d)]
     if finite.size == 0:
         raise RecognitionError(

@@ -69,3 +69,60 @@ def test_cached_view_centroids_equal_the_built_ones(tmp_path, monkeypatch):
         assert np.array_equal(v.directions, ref.directions)
         assert np.array_equal(v.centroids, ref.centroids, equal_nan=True)
     assert len(list((tmp_path / "view_centroids_v1").glob("*.npz"))) == 1
+
+
+def test_cached_rejection_calibration_equals_the_computed_one_and_is_read_back(tmp_path, monkeypatch):
+    """Catches: a cold start that computes the database's leave-one-out distances again (~0.5 s on 832 views), or
+    a cached entry that gives other thresholds than the computation (same key, other database)."""
+    import semslam.recognition.rejection as rejection
+
+    monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(tmp_path))
+    rng = np.random.default_rng(2)
+    X = rng.random((40, 30))
+    y = np.repeat(["a", "b", "c", "d"], 10)
+    V = rng.normal(size=(40, 3))
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    plain = rejection.loo_same_class_distances(X, y, rejection.same_viewpoint_pairs(V, 10.0))
+    ref = float(np.quantile(plain[np.isfinite(plain)], 0.95))
+    first = rejection.calibrate_rejection(X, y, view_directions=V)
+    calls = []
+    monkeypatch.setattr(rejection, "loo_same_class_distances", lambda *a: calls.append(a) or plain)
+    again = rejection.calibrate_rejection(X, y, view_directions=V)
+    assert not calls, "the second calibration of the same database computed the distances again"
+    assert first.global_threshold == again.global_threshold == ref
+    other = rejection.calibrate_rejection(X[::-1], y, view_directions=V)  # another database: computed
+    assert len(calls) == 1 and np.isfinite(other.global_threshold)
+
+
+def test_cached_pose_model_samples_and_icp_normals_equal_the_computed_ones(tmp_path, monkeypatch):
+    """Catches: a pose model prepared from the cache that differs from one prepared afresh (the normals small_gicp
+    estimates, the oriented samples of the search and the visibility), and small_gicp's cloud not built when an
+    ICP needs it after its normals came from the cache."""
+    import small_gicp
+
+    from semslam.cloud import PointCloud
+    from semslam.pose import PoseConfig
+    from semslam.pose.model import prepare_pose_model
+    from semslam.registration import align_icp, prepare_icp_target
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(3000, 3))
+    pts = 0.05 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    views = [PointCloud(pts[pts @ v > -0.01], viewpoint_xyz_m=0.5 * np.asarray(v, dtype=float))
+             for v in ([1.0, 0, 0], [0, 1.0, 0])]
+    monkeypatch.setenv("SEMSLAM_NO_CACHE", "1")
+    fresh = prepare_pose_model(views, PoseConfig())
+    monkeypatch.delenv("SEMSLAM_NO_CACHE")
+    monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(tmp_path))
+    for _ in range(2):  # computed and stored, then read back
+        m = prepare_pose_model(views, PoseConfig())
+        for name in ("coarse_points", "normals_object", "visibility_points", "visibility_normals"):
+            assert np.array_equal(getattr(m, name), getattr(fresh, name)), name
+    assert {p.name for p in tmp_path.iterdir()} >= {"icp_normals_v1", "oriented_samples_v1"}
+    target = prepare_icp_target(pts, method="plane")  # normals from the cache: small_gicp's parts not built yet
+    cloud = small_gicp.PointCloud(pts)
+    small_gicp.estimate_normals(cloud, num_neighbors=20)
+    assert np.array_equal(target.normals_xyz, cloud.normals()[:, :3])
+    shifted = pts[::3] + [0.004, -0.003, 0.002]
+    res = align_icp(shifted, target, max_correspondence_m=0.02)
+    assert np.allclose(res.T_target_source.matrix[:3, 3], [-0.004, 0.003, -0.002], atol=1e-3)
