@@ -1,6 +1,8 @@
 """Tail latency of scan -> detections (issue #18, item 5): p50 / p90 / p99 over the default mission's scans,
 warm (the recognizer prepared as the demo does it, the first scan dropped), and the wall time of a cold
-single-scan ``semslam recognize SCAN --db DB`` (a fresh process: best of N) with its ``timings_ms``.
+single-scan ``semslam recognize SCAN --db DB`` (a fresh process: best and median of N) with its ``timings_ms``, on the
+demo's database (the built-in Kinect views, 8 per class) and on the database a user of the laser vehicle builds
+(``semslam db build --builtin --sensor laser``: 64 views and 16 pose-model views per class, ~8 s to build).
 
 Run from the repository root, on the demo's mission and database (``make demo`` or ``semslam demo --quick --out
 DIR`` makes them; without them the script stops and says so)::
@@ -100,23 +102,51 @@ def warm(args) -> None:
 
 def cold(args) -> None:
     """Fresh ``semslam recognize`` processes: process wall (and CPU: user + sys, which the machine's load inflates
-    less) best and median of ``--cold-repeat``, with the distance-field cache as it is (``--cold-cache warm``: one
-    unmeasured run fills it first) or empty (a new empty ``SEMSLAM_CACHE_DIR`` for every run)."""
-    import shutil
+    less) best and median of ``--cold-repeat``, with the on-disk cache as it is (``--cold-cache warm``: one
+    unmeasured run fills it first) or empty (a new empty ``SEMSLAM_CACHE_DIR`` for every run), on every database
+    of ``--cold-db``."""
     import tempfile
 
     run = Path(args.run)
-    exe = str(Path(sys.executable).with_name("semslam"))
     base_env = _child_env(args.no_bytecode)
-    print(f"\n## Cold `semslam recognize SCAN --db {run / 'db.npz'} --json` (fresh process, {args.cold_repeat} runs, "
-          f"distance-field cache {args.cold_cache}, bytecode cache "
+    with tempfile.TemporaryDirectory(prefix="semslam_cold_db_") as tmp:
+        for which in args.cold_db:
+            _cold_table(args, run, _cold_database(which, run, Path(tmp), base_env), base_env)
+    _floor(args.cold_repeat, base_env)
+
+
+def _cold_database(which: str, run: Path, tmp: Path, env: dict) -> Path:
+    """The database of a cold table: ``demo`` (the run's db.npz: the built-in Kinect views, 8 per class),
+    ``user`` (what a user of the laser vehicle builds: ``semslam db build --builtin --sensor laser``, 64 views
+    and 16 pose-model views per class) or a file."""
+    if which == "demo":
+        return run / "db.npz"
+    if which != "user":
+        return Path(which)
+    out = tmp / "user_db.npz"
+    cmd = [str(Path(sys.executable).with_name("semslam")), "db", "build", "--builtin", "--sensor", "laser",
+           "--out", str(out)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True, env=env)
+    print(f"\n(`{' '.join(cmd[1:-2])}`: {time.perf_counter() - t0:.0f} s)")
+    return out
+
+
+def _cold_table(args, run: Path, db: Path, base_env: dict) -> None:
+    """One cold table: fresh ``semslam recognize`` processes on ``db``."""
+    import shutil
+    import tempfile
+
+    exe = str(Path(sys.executable).with_name("semslam"))
+    print(f"\n## Cold `semslam recognize SCAN --db {db.name} --json` (fresh process, {args.cold_repeat} runs, "
+          f"on-disk cache {args.cold_cache}, bytecode cache "
           f"{'off' if base_env.get('PYTHONDONTWRITEBYTECODE') else 'on'})\n")
     print("| scan | detections | load (first run) | wall best / median s | CPU best / median s | "
           "load_db + recognize best / median ms | best run's timings_ms |")
     print("|---|---|---|---:|---:|---:|---|")
     for sid in args.cold_scans:
         scan = run / "mission" / "scans" / f"scan_{sid:05d}.pcd"
-        cmd = [exe, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"]
+        cmd = [exe, "recognize", str(scan), "--db", str(db), "--json"]
         env = dict(base_env)
         if args.cold_cache == "warm":
             subprocess.run(cmd, check=True, capture_output=True, env=env)
@@ -143,7 +173,6 @@ def cold(args) -> None:
         print(f"| {sid} | {best[4]} | {load0} | {walls.min():.2f} / {np.median(walls):.2f} | "
               f"{cpus.min():.2f} / {np.median(cpus):.2f} | {inproc.min():.0f} / {np.median(inproc):.0f} | "
               + ", ".join(f"{k} {v:.0f}" for k, v in best[3].items()) + " |")
-    _floor(args.cold_repeat, base_env)
 
 
 _FLOOR_KERNEL = '''import numpy as np
@@ -202,7 +231,10 @@ def main() -> None:
     ap.add_argument("--cold-scans", type=int, nargs="+", default=[10])
     ap.add_argument("--cold-repeat", type=int, default=3)
     ap.add_argument("--cold-cache", choices=("warm", "empty"), default="warm",
-                    help="the distance-field cache of the cold runs: filled by a first run, or empty for every run")
+                    help="the on-disk cache of the cold runs: filled by a first run, or empty for every run")
+    ap.add_argument("--cold-db", nargs="+", default=["demo", "user"], metavar="DB",
+                    help="the cold tables' databases: demo (the run's db.npz, 8 Kinect views per class), user (built "
+                         "as a user of the laser vehicle does: `semslam db build --builtin --sensor laser`) or files")
     ap.add_argument("--no-bytecode", action="store_true",
                     help="keep the parent's PYTHONDONTWRITEBYTECODE in the cold runs (default: bytecode cache on)")
     args = ap.parse_args()
