@@ -4,12 +4,18 @@ Content-addressed: an entry's name is the SHA-256 of everything it is derived fr
 the parameters and a format version), so a stale entry is never read, and entries are written atomically
 (temporary file, then rename). A missing, unreadable or corrupted entry is rebuilt; a cache folder that cannot
 be written (read-only home) only costs the rebuild. ``SEMSLAM_NO_CACHE=1`` turns the cache off.
+
+The cache is bounded: after every write, the entries least recently used (written or read) are deleted until the
+entries of every kind together take at most ``$SEMSLAM_CACHE_MAX_MB`` (2048 MB by default; a 13-class database of
+laser views takes ~0.3 GB, most of it distance fields). Only entries of a kind (``NAME_vN/*.npz``: a kind's name
+ends with its format version) are ever deleted.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import tempfile
 import zipfile
 from pathlib import Path
@@ -17,7 +23,10 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["cache_dir", "cached_arrays"]
+__all__ = ["cache_dir", "cache_limit_bytes", "cached_arrays"]
+
+DEFAULT_LIMIT_MB = 2048.0
+_KIND = re.compile(r"[a-z0-9_]+_v[0-9]+")
 
 
 def cache_dir() -> Path:
@@ -27,8 +36,11 @@ def cache_dir() -> Path:
 
 
 def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
-    """``build()`` (a dict of str to ndarray), read from the cache when an entry of ``kind`` with the same
-    ``key`` (a list of ndarrays, strings and numbers) was written before."""
+    """``build()`` (a dict of str to ndarray), read from the cache when an entry of ``kind`` (``NAME_vN``, N the
+    format version of its entries) with the same ``key`` (a list of ndarrays, strings and numbers) was written
+    before."""
+    if not _KIND.fullmatch(kind):
+        raise ValueError(f"cache kind {kind!r} is not NAME_vN")  # a programming error, not a user's
     if os.environ.get("SEMSLAM_NO_CACHE", "") not in ("", "0"):
         return build()
     h = hashlib.sha256(kind.encode())
@@ -39,10 +51,13 @@ def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
             h.update(a.tobytes())
         else:
             h.update(repr(part).encode())
+    limit = cache_limit_bytes()
     path = cache_dir() / kind / f"{h.hexdigest()}.npz"
     try:
         with np.load(path, allow_pickle=False) as z:
-            return {name: z[name] for name in z.files}
+            arrays = {name: z[name] for name in z.files}
+        _touch(path)
+        return arrays
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         pass
     arrays = build()
@@ -56,6 +71,54 @@ def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+        _evict(cache_dir(), limit, keep=path)
     except OSError:
         pass
     return arrays
+
+
+def cache_limit_bytes() -> int:
+    """``$SEMSLAM_CACHE_MAX_MB`` (default 2048) in bytes."""
+    from .errors import InputError
+
+    raw = os.environ.get("SEMSLAM_CACHE_MAX_MB", "")
+    try:
+        mb = float(raw) if raw.strip() else DEFAULT_LIMIT_MB
+    except ValueError:
+        mb = float("nan")
+    if not mb >= 0 or mb == float("inf"):
+        raise InputError(f"The environment variable SEMSLAM_CACHE_MAX_MB must be a size in MB (a number >= 0). "
+                         f"Got {raw!r} instead.")
+    return int(mb * 2**20)
+
+
+def _touch(path: Path) -> None:
+    """Mark an entry used now (its modification time orders the eviction)."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
+def _evict(root: Path, limit: int, keep: Path) -> None:
+    """Delete the least recently used ``root/KIND/*.npz`` entries (never ``keep``) until they take <= ``limit``."""
+    entries = []
+    for p in root.glob("*/*.npz"):
+        if not _KIND.fullmatch(p.parent.name):
+            continue
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        entries.append((st.st_mtime, st.st_size, p))
+    total = sum(e[1] for e in entries)
+    for _, size, p in sorted(entries, key=lambda e: e[0]):
+        if total <= limit:
+            break
+        if p == keep:
+            continue
+        try:
+            p.unlink()
+            total -= size
+        except OSError:
+            pass

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from semslam._cache import cached_arrays
+from semslam.errors import InputError
 from semslam.pose.search import DistanceField
 
 
@@ -18,27 +20,59 @@ def test_cache_hits_rebuilds_a_corrupt_entry_and_can_be_off(tmp_path, monkeypatc
         return {"a": np.arange(5.0) * len(calls)}
 
     key = [np.ones(3), "x", 2.5]
-    first = cached_arrays("kind", key, build)
-    again = cached_arrays("kind", key, build)
+    first = cached_arrays("kind_v1", key, build)
+    again = cached_arrays("kind_v1", key, build)
     assert len(calls) == 1 and np.array_equal(first["a"], again["a"])
-    other = cached_arrays("kind", [np.ones(3), "x", 2.6], build)  # another key: built
+    other = cached_arrays("kind_v1", [np.ones(3), "x", 2.6], build)  # another key: built
     assert len(calls) == 2 and np.array_equal(other["a"], np.arange(5.0) * 2)
-    (entry,) = [p for p in (tmp_path / "kind").iterdir() if p.read_bytes() and np.array_equal(
+    (entry,) = [p for p in (tmp_path / "kind_v1").iterdir() if p.read_bytes() and np.array_equal(
         np.load(p)["a"], np.arange(5.0))]
     entry.write_bytes(b"not a zip")
-    rebuilt = cached_arrays("kind", key, build)  # corrupt: rebuilt (with this build's numbers), and rewritten
+    rebuilt = cached_arrays("kind_v1", key, build)  # corrupt: rebuilt (with this build's numbers), and rewritten
     assert len(calls) == 3 and np.array_equal(rebuilt["a"], np.arange(5.0) * 3)
-    assert not list((tmp_path / "kind").glob(".*.tmp"))
+    assert not list((tmp_path / "kind_v1").glob(".*.tmp"))
     monkeypatch.setenv("SEMSLAM_NO_CACHE", "1")
-    cached_arrays("kind", key, build)
+    cached_arrays("kind_v1", key, build)
     assert len(calls) == 4
+
+
+def test_cache_keeps_within_its_limit_by_evicting_the_least_recently_used(tmp_path, monkeypatch):
+    """Catches: a cache that grows without bound on a vehicle's disk (every new database adds ~0.3 GB), that evicts
+    an entry just read rather than an old one, or that deletes files it did not write."""
+    import os
+
+    monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(tmp_path))
+    (tmp_path / "ros1-bridge").mkdir()
+    foreign = tmp_path / "ros1-bridge" / "other.npz"  # not a cache kind: never deleted
+    foreign.write_bytes(b"x" * 50_000)
+    size = 10_000  # bytes of one entry's array: the limit holds two entries, not three
+
+    def entry(i):
+        return cached_arrays("kind_v1", [i], lambda: {"a": np.full(size // 8, float(i))})
+
+    monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", str(2.5 * size / 2**20))
+    entry(0)
+    entry(1)
+    files = sorted((tmp_path / "kind_v1").glob("*.npz"))
+    for age, p in enumerate(files):  # both written long ago, in a known order
+        os.utime(p, (1e9 + age, 1e9 + age))
+    first = min(files, key=lambda p: p.stat().st_mtime)
+    assert np.load(first)["a"][0] in (0.0, 1.0)
+    read_back = entry(int(np.load(first)["a"][0]))  # used now: the other one is the least recently used
+    entry(2)
+    left = sorted(float(np.load(p)["a"][0]) for p in (tmp_path / "kind_v1").glob("*.npz"))
+    assert left == sorted({float(read_back["a"][0]), 2.0})
+    assert foreign.exists()
+    monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", "lots")
+    with pytest.raises(InputError, match="SEMSLAM_CACHE_MAX_MB"):
+        entry(3)
 
 
 def test_cache_in_an_unwritable_place_still_answers(tmp_path, monkeypatch):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     monkeypatch.setenv("SEMSLAM_CACHE_DIR", str(blocker))  # a file: the folder cannot be made
-    assert np.array_equal(cached_arrays("k", [1], lambda: {"a": np.zeros(2)})["a"], np.zeros(2))
+    assert np.array_equal(cached_arrays("k_v1", [1], lambda: {"a": np.zeros(2)})["a"], np.zeros(2))
 
 
 def test_cached_distance_field_equals_the_built_one(tmp_path, monkeypatch):
