@@ -259,7 +259,8 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         )
     views = _as_views(model)
     pts = np.vstack([v[0] for v in views])
-    down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m)
+    digest = _views_digest(views)
+    down, nrm = _oriented_samples(views, cfg.voxel_m, cfg.normal_radius_m, digest)
     feats = ftree = None
     if cfg.coarse_method == "ransac":
         from ..descriptors.fpfh import compute_fpfh
@@ -276,7 +277,7 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
         small_gicp.estimate_normals(cloud, num_neighbors=cfg.model_normals_k)
         normals = np.ascontiguousarray(cloud.normals()[:, :3])
     vis_pts, vis_nrm = _oriented_samples(
-        views, cfg.visibility_voxel_m, max(cfg.normal_radius_m, 1.5 * cfg.visibility_voxel_m)
+        views, cfg.visibility_voxel_m, max(cfg.normal_radius_m, 1.5 * cfg.visibility_voxel_m), digest
     )
     ok = np.isfinite(vis_nrm).all(axis=1)
     vis_pts, vis_nrm = vis_pts[ok], vis_nrm[ok]
@@ -321,19 +322,31 @@ def _rotation_hierarchy(n_fine: int, n_coarse: int) -> RotationHierarchy:
     return RotationHierarchy.build(so3_grid(n_fine), n_coarse)
 
 
-def _oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _oriented_samples(views, leaf_m: float, radius_m: float, digest: str) -> tuple[np.ndarray, np.ndarray]:
     """Voxelised points of every view with normals oriented outwards (towards the view's viewpoint), through the
-    on-disk cache (:mod:`semslam._cache`): on a database of 16 laser views per class (~380 000 points) they are
-    ~0.1 s of every class's first pose in a fresh process."""
+    on-disk cache (:mod:`semslam._cache`) under the views' ``digest`` (:func:`_views_digest`): on a database of 16
+    laser views per class (~380 000 points) they are ~0.1 s of every class's first pose in a fresh process."""
     from .._cache import cached_arrays
 
-    key: list = [float(leaf_m), float(radius_m), len(views)]
-    for pts, vp, given in views:
-        key += [pts, "no viewpoint" if vp is None else np.asarray(vp, dtype=float),
-                "no normals" if given is None else given]
-    out = cached_arrays("oriented_samples_v1", key,
+    out = cached_arrays("oriented_samples_v1", [digest, float(leaf_m), float(radius_m)],
                         lambda: dict(zip(("points", "normals"), _build_oriented_samples(views, leaf_m, radius_m))))
     return out["points"], out["normals"]
+
+
+def _views_digest(views) -> str:
+    """SHA-256 of the model's views (points, viewpoints, given normals): hashed once for both sample sets."""
+    import hashlib
+
+    h = hashlib.sha256(str(len(views)).encode())
+    for pts, vp, given in views:
+        for a in (pts, vp, given):
+            if a is None:
+                h.update(b"none")
+            else:
+                a = np.ascontiguousarray(a, dtype=np.float64)
+                h.update(f"{a.shape}".encode())
+                h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def _build_oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:

@@ -153,6 +153,14 @@ def test_cached_pose_model_samples_and_icp_normals_equal_the_computed_ones(tmp_p
         for name in ("coarse_points", "normals_object", "visibility_points", "visibility_normals"):
             assert np.array_equal(getattr(m, name), getattr(fresh, name)), name
     assert {p.name for p in tmp_path.iterdir()} >= {"icp_normals_v1", "oriented_samples_v1"}
+    moved = [PointCloud(v.points_xyz_m + [0.0, 0.0, 0.001], viewpoint_xyz_m=v.viewpoint_xyz_m) for v in views]
+    other = prepare_pose_model(moved, PoseConfig())  # another model: its own samples, not the cached ones
+    monkeypatch.setenv("SEMSLAM_NO_CACHE", "1")
+    other_fresh = prepare_pose_model(moved, PoseConfig())
+    monkeypatch.delenv("SEMSLAM_NO_CACHE")
+    assert not np.array_equal(other_fresh.coarse_points, fresh.coarse_points)
+    for name in ("coarse_points", "normals_object", "visibility_points", "visibility_normals"):
+        assert np.array_equal(getattr(other, name), getattr(other_fresh, name)), name
     target = prepare_icp_target(pts, method="plane")  # normals from the cache: small_gicp's parts not built yet
     cloud = small_gicp.PointCloud(pts)
     small_gicp.estimate_normals(cloud, num_neighbors=20)
