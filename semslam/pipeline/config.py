@@ -121,8 +121,9 @@ class PipelineConfig:
         by default; the ``seabed`` preset uses 10 mm (objects resting on the seabed, not buried in it). Needs
         ``estimate_pose``.
     verify_next_classes : int
-        A cluster whose class fails hypothesis verification is tried as the next-nearest classes (the nearest view
-        of each other class the rejection accepts and whose size test it passes, nearest first), up to this many;
+        A cluster whose class fails hypothesis verification, or whose size test (``size_tolerance``) it fails, is
+        tried as the next-nearest classes (the nearest view of each other class the rejection accepts and whose size
+        test it passes, nearest first), up to this many;
         the first whose pose verifies is the detection (its reason says which class failed first and why). A strip
         of a 12 mm plate cut by the swath's border is nearer a thicker flange's face than the plate's: the
         flange's pose, 15 mm inside the floor, fails, the plate's verifies. 0 (default): the nearest class only.

@@ -106,12 +106,14 @@ def _recognize_cluster(rec: Any, ctx: ScanContext, seg: SegmentationResult, k: i
     t2 = time.perf_counter()
     timings["descriptors"] += (t1 - t0) * 1e3
     timings["matching"] += (t2 - t1) * 1e3
-    why = why or size_rejection(rec, label, extent)
-    if why:
+    too_big = "" if why else size_rejection(rec, label, extent)
+    if why or (too_big and not cfg.verify_next_classes):
         return ClusterOutcome(k, cluster.n_points, UNKNOWN_LABEL, found.nearest_label, found.distance,
-                              found.threshold, None, why, **common)
+                              found.threshold, None, why or too_big, **common)
     hyp = Hypothesis(_input_indices(seg, k), cluster, label, view_index, found, bool(border))
-    det, failed = _pose_and_verify(rec, ctx, seg, hyp, cluster_seed, timings)
+    # too big for the nearest class: the next classes are tried as after a failed verification
+    det, failed = (None, too_big.removeprefix("rejected: ")) if too_big else \
+        _pose_and_verify(rec, ctx, seg, hyp, cluster_seed, timings)
     tried = []
     if failed and cfg.verify_next_classes:
         for alt in next_classes(rec, found, label, extent):

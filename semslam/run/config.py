@@ -162,8 +162,9 @@ PRESETS: dict[str, dict] = {
     # beside it is otherwise one cluster with it) and the pose search kept upright (half-turn flips resolved); its
     # floor check (cluttered's) chosen here: on seed 0 every right pose within 5.1 mm of the removed plane, a plate
     # taken for a thicker flange 14.3-15.6 mm inside it.
-    # A cluster whose nearest class fails verification is tried as the next one (a strip of the 12 mm valve-panel
-    # base, nearer the flange's face than the plate's: the flange 15 mm in the floor, the plate verifies); a
+    # A cluster whose nearest class fails verification (or is too small for it) is tried as the next one (a strip
+    # of the 12 mm valve-panel base, nearer the flange's face than the plate's: the flange 15 mm in the floor, the
+    # plate verifies); a
     # border-cut cluster's translation searched across the object (a strip of a flange's rim: its centroid ~10 cm
     # from the whole view's; a union of clusters is searched the same way, since 2026-12-06: benchmarks/history/
     # catalogue.md, session 24). The pose search counts the scan's other clusters about a cluster as seen surfaces (a

@@ -155,3 +155,22 @@ def test_the_setting_is_checked_and_needs_a_verification():
         PipelineConfig(verify_min_fitness=0.95, verify_next_classes=1.5)
     with pytest.raises(InputError, match="verify_next_classes' argument of PipelineConfig needs a verification"):
         PipelineConfig(verify_next_classes=1)
+
+
+def test_a_cluster_too_big_for_its_nearest_class_is_tried_as_the_next_classes(plate_scene, verifies_only):
+    """Catches a size test that ends the cluster where a failed verification would try the next class (a border-cut
+    reducing tee 0.271 m across, nearest an equal tee of 0.266 m at most: rejected without being tried as itself)."""
+    posed = verifies_only("plate")
+    cfg = PipelineConfig(verify_min_fitness=0.95, verify_next_classes=1, size_tolerance=0.1)
+    out = _outcome(_Recognizer(cfg, "flange", ["plate"], too_small=["flange"]), plate_scene)
+    assert posed == ["plate"] and out.label == "plate" and out.nearest_label == "flange"
+    assert out.reason.startswith("detected, as the next class (flange: extent ") and "too big for flange" in out.reason
+    posed.clear()  # no next class fits: the reason gives the size test first
+    out = _outcome(_Recognizer(cfg, "flange", ["valve"], too_small=["flange"]), plate_scene)
+    assert posed == ["valve"] and out.detection is None
+    assert out.reason.startswith("rejected: extent ") and "too big for flange; then as valve: pose verification" in \
+        out.reason
+    posed.clear()  # without next classes the size test ends it, as before
+    out = _outcome(_Recognizer(PipelineConfig(verify_min_fitness=0.95, size_tolerance=0.1), "flange", ["plate"],
+                               too_small=["flange"]), plate_scene)
+    assert posed == [] and out.detection is None and out.reason.startswith("rejected: extent ")
