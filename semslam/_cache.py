@@ -7,8 +7,8 @@ be written (read-only home) only costs the rebuild. ``SEMSLAM_NO_CACHE=1`` turns
 
 The cache is bounded: after every write, the entries least recently used (written or read) are deleted until the
 entries of every kind together take at most ``$SEMSLAM_CACHE_MAX_MB`` (2048 MB by default; a 13-class database of
-laser views takes ~0.3 GB, most of it distance fields). Only entries of a kind (``NAME_vN/*.npz``: a kind's name
-ends with its format version) are ever deleted.
+laser views takes ~0.3 GB, most of it distance fields). Only the cache's own entries are ever deleted: files named
+by a SHA-256 (64 hex digits, ``.npz``) in a kind's folder (``NAME_vN``: a kind's name ends with its format version).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ __all__ = ["cache_dir", "cache_limit_bytes", "cached_arrays"]
 
 DEFAULT_LIMIT_MB = 2048.0
 _KIND = re.compile(r"[a-z0-9_]+_v[0-9]+")
+_ENTRY = re.compile(r"[0-9a-f]{64}\.npz")  # an entry's name: the SHA-256 of its key
 
 
 def cache_dir() -> Path:
@@ -101,10 +102,11 @@ def _touch(path: Path) -> None:
 
 
 def _evict(root: Path, limit: int, keep: Path) -> None:
-    """Delete the least recently used ``root/KIND/*.npz`` entries (never ``keep``) until they take <= ``limit``."""
+    """Delete the least recently used ``root/KIND_vN/SHA256.npz`` entries (never ``keep``) until they take
+    <= ``limit``."""
     entries = []
     for p in root.glob("*/*.npz"):
-        if not _KIND.fullmatch(p.parent.name):
+        if not (_KIND.fullmatch(p.parent.name) and _ENTRY.fullmatch(p.name)):
             continue
         try:
             st = p.stat()

@@ -45,6 +45,9 @@ def test_cache_keeps_within_its_limit_by_evicting_the_least_recently_used(tmp_pa
     (tmp_path / "ros1-bridge").mkdir()
     foreign = tmp_path / "ros1-bridge" / "other.npz"  # not a cache kind: never deleted
     foreign.write_bytes(b"x" * 50_000)
+    (tmp_path / "kind_v1").mkdir()
+    users = tmp_path / "kind_v1" / "results.npz"  # in a kind's folder but not named by a hash: never deleted
+    users.write_bytes(b"y" * 50_000)
     size = 10_000  # bytes of one entry's array: the limit holds two entries, not three
 
     def entry(i):
@@ -53,16 +56,16 @@ def test_cache_keeps_within_its_limit_by_evicting_the_least_recently_used(tmp_pa
     monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", str(2.5 * size / 2**20))
     entry(0)
     entry(1)
-    files = sorted((tmp_path / "kind_v1").glob("*.npz"))
+    files = sorted(p for p in (tmp_path / "kind_v1").glob("*.npz") if p != users)
     for age, p in enumerate(files):  # both written long ago, in a known order
         os.utime(p, (1e9 + age, 1e9 + age))
     first = min(files, key=lambda p: p.stat().st_mtime)
     assert np.load(first)["a"][0] in (0.0, 1.0)
     read_back = entry(int(np.load(first)["a"][0]))  # used now: the other one is the least recently used
     entry(2)
-    left = sorted(float(np.load(p)["a"][0]) for p in (tmp_path / "kind_v1").glob("*.npz"))
+    left = sorted(float(np.load(p)["a"][0]) for p in (tmp_path / "kind_v1").glob("*.npz") if p != users)
     assert left == sorted({float(read_back["a"][0]), 2.0})
-    assert foreign.exists()
+    assert foreign.exists() and users.exists()
     monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", "lots")
     with pytest.raises(InputError, match="SEMSLAM_CACHE_MAX_MB"):
         entry(3)
