@@ -9,6 +9,8 @@ The cache is bounded: after every write, the entries least recently used (writte
 entries of every kind together take at most ``$SEMSLAM_CACHE_MAX_MB`` (2048 MB by default; a 13-class database of
 laser views takes ~0.3 GB, most of it distance fields). Only the cache's own entries are ever deleted: files named
 by a SHA-256 (64 hex digits, ``.npz``) in a kind's folder (``NAME_vN``: a kind's name ends with its format version).
+When the limit is smaller than what one run uses (an entry written or read since the process started is evicted),
+a :class:`CacheLimitWarning` says so, once per process.
 """
 
 from __future__ import annotations
@@ -17,17 +19,26 @@ import hashlib
 import os
 import re
 import tempfile
+import time
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["cache_dir", "cache_limit_bytes", "cached_arrays"]
+__all__ = ["CacheLimitWarning", "cache_dir", "cache_limit_bytes", "cached_arrays"]
 
 DEFAULT_LIMIT_MB = 2048.0
 _KIND = re.compile(r"[a-z0-9_]+_v[0-9]+")
 _ENTRY = re.compile(r"[0-9a-f]{64}\.npz")  # an entry's name: the SHA-256 of its key
+_PROCESS_START = time.time()
+_warned: list = []
+
+
+class CacheLimitWarning(UserWarning):
+    """The cache evicted an entry this process wrote or read: its limit is smaller than what one run uses, so every
+    run builds those entries again."""
 
 
 def cache_dir() -> Path:
@@ -114,7 +125,7 @@ def _evict(root: Path, limit: int, keep: Path) -> None:
             continue
         entries.append((st.st_mtime, st.st_size, p))
     total = sum(e[1] for e in entries)
-    for _, size, p in sorted(entries, key=lambda e: e[0]):
+    for mtime, size, p in sorted(entries, key=lambda e: e[0]):
         if total <= limit:
             break
         if p == keep:
@@ -123,4 +134,10 @@ def _evict(root: Path, limit: int, keep: Path) -> None:
             p.unlink()
             total -= size
         except OSError:
-            pass
+            continue
+        if mtime >= _PROCESS_START - 1.0 and not _warned:  # used by this run: the limit is too small for one run
+            _warned.append(p)
+            warnings.warn(f"The semslam cache ({root}) evicted an entry this run uses: its limit, "
+                          f"SEMSLAM_CACHE_MAX_MB = {limit / 2**20:g}, is smaller than one run's derived arrays, which "
+                          f"are then built again every run. Raise SEMSLAM_CACHE_MAX_MB.", CacheLimitWarning,
+                          stacklevel=3)

@@ -66,6 +66,12 @@ def test_cache_keeps_within_its_limit_by_evicting_the_least_recently_used(tmp_pa
     left = sorted(float(np.load(p)["a"][0]) for p in (tmp_path / "kind_v1").glob("*.npz") if p != users)
     assert left == sorted({float(read_back["a"][0]), 2.0})
     assert foreign.exists() and users.exists()
+    import semslam._cache as cache_module
+
+    monkeypatch.setattr(cache_module, "_warned", [])
+    monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", str(1.5 * size / 2**20))  # one entry: this run's own are evicted
+    with pytest.warns(cache_module.CacheLimitWarning, match="Raise SEMSLAM_CACHE_MAX_MB"):
+        entry(4)
     monkeypatch.setenv("SEMSLAM_CACHE_MAX_MB", "lots")
     with pytest.raises(InputError, match="SEMSLAM_CACHE_MAX_MB"):
         entry(3)
