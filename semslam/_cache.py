@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["CacheLimitWarning", "cache_dir", "cache_limit_bytes", "cached_arrays"]
+__all__ = ["CacheLimitWarning", "cache_dir", "cache_limit_bytes", "cached_arrays", "key_digest"]
 
 DEFAULT_LIMIT_MB = 2048.0
 _KIND = re.compile(r"[a-z0-9_]+_v[0-9]+")
@@ -47,6 +47,20 @@ def cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "semslam"
 
 
+def key_digest(key: list) -> str:
+    """SHA-256 (hex) of ``key``: ndarrays by dtype, shape and bytes, anything else by its ``repr``. A digest is a
+    valid part of another key (a large input hashed once for several entries)."""
+    h = hashlib.sha256()
+    for part in key:
+        if isinstance(part, np.ndarray):
+            a = np.ascontiguousarray(part)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(part).encode())
+    return h.hexdigest()
+
+
 def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
     """``build()`` (a dict of str to ndarray), read from the cache when an entry of ``kind`` (``NAME_vN``, N the
     format version of its entries) with the same ``key`` (a list of ndarrays, strings and numbers) was written
@@ -55,16 +69,9 @@ def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
         raise ValueError(f"cache kind {kind!r} is not NAME_vN")  # a programming error, not a user's
     if os.environ.get("SEMSLAM_NO_CACHE", "") not in ("", "0"):
         return build()
-    h = hashlib.sha256(kind.encode())
-    for part in key:
-        if isinstance(part, np.ndarray):
-            a = np.ascontiguousarray(part)
-            h.update(f"{a.dtype.str}{a.shape}".encode())
-            h.update(a.tobytes())
-        else:
-            h.update(repr(part).encode())
+    digest = key_digest([kind, *key])
     limit = cache_limit_bytes()
-    path = cache_dir() / kind / f"{h.hexdigest()}.npz"
+    path = cache_dir() / kind / f"{digest}.npz"
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {name: z[name] for name in z.files}

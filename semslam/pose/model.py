@@ -335,18 +335,10 @@ def _oriented_samples(views, leaf_m: float, radius_m: float, digest: str) -> tup
 
 def _views_digest(views) -> str:
     """SHA-256 of the model's views (points, viewpoints, given normals): hashed once for both sample sets."""
-    import hashlib
+    from .._cache import key_digest
 
-    h = hashlib.sha256(str(len(views)).encode())
-    for pts, vp, given in views:
-        for a in (pts, vp, given):
-            if a is None:
-                h.update(b"none")
-            else:
-                a = np.ascontiguousarray(a, dtype=np.float64)
-                h.update(f"{a.shape}".encode())
-                h.update(a.tobytes())
-    return h.hexdigest()
+    return key_digest([len(views), *(part if part is None else np.asarray(part, dtype=np.float64)
+                                      for view in views for part in view)])
 
 
 def _build_oriented_samples(views, leaf_m: float, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
