@@ -88,6 +88,29 @@ def _T_world_rest(north_m: float, east_m: float, depth_m: float, yaw_rad: float)
     return T
 
 
+#: How far inside the flat floor's edge an object pushed off the sloped sides ends (m).
+FLOOR_EDGE_MARGIN_M = 0.005
+
+
+def _on_flat_floor(cfg: WorldConfig, vertices_object: np.ndarray, T_rest_object: np.ndarray, north_m: float,
+                   east_m: float, yaw_rad: float) -> tuple[float, float]:
+    """``(north_m, east_m)`` moved towards the tank's centre just enough that the whole object, resting in
+    ``T_rest_object`` at that yaw, lies on the flat floor (unchanged when it does already). An object placed across
+    the foot of a sloped side would otherwise reach into the slope, a scene no scan of a real tank shows (its right
+    pose then lies behind the slope's surface, which the pipeline's floor check rightly refuses)."""
+    hx, hy = cfg.tank_length_m / 2 - cfg.slope_run_m, cfg.tank_width_m / 2 - cfg.slope_run_m
+    T = _T_world_rest(0.0, 0.0, 0.0, yaw_rad) @ T_rest_object
+    V = vertices_object @ T[:3, :3].T + T[:3, 3]  # about the placement point
+    out = [float(north_m), float(east_m)]
+    for axis, half in ((0, hx), (1, hy)):
+        lo, hi = out[axis] + V[:, axis].min(), out[axis] + V[:, axis].max()
+        if hi > half:
+            out[axis] -= hi - half + FLOOR_EDGE_MARGIN_M
+        elif lo < -half:
+            out[axis] += -half - lo + FLOOR_EDGE_MARGIN_M
+    return out[0], out[1]
+
+
 def _rock(rng: np.random.Generator) -> trimesh.Trimesh:
     radii = rng.uniform([0.05, 0.04, 0.025], [0.12, 0.09, 0.06])
     d = rng.normal(size=(40, 3))
@@ -110,7 +133,8 @@ def build_world(config: WorldConfig, models: dict[str, ObjectModel], *, seed: in
 
     The fittings in ``models`` whose labels are in :data:`ROUTE_ORDER` go to the corners of the square
     (in that order, counter-clockwise seen from above: +north, then +east ...), other user models
-    are spread along the square's diagonals. Each rests in its most probable pose with a random yaw.
+    are spread along the square's diagonals. Each rests in its most probable pose with a random yaw, wholly on the
+    flat floor (moved towards the centre, by as little as needed, when it would reach into a sloped side).
     """
     from .._validation import as_rng
 
@@ -128,7 +152,9 @@ def build_world(config: WorldConfig, models: dict[str, ObjectModel], *, seed: in
             a = 2 * np.pi * (i - 4) / max(1, len(labels) - 4)
             n, e = cn + 0.5 * h * np.cos(a), ce + 0.5 * h * np.sin(a)
         n, e = (n, e) + rng.uniform(-config.placement_jitter_m, config.placement_jitter_m, 2)
-        T = _T_world_rest(n, e, float(floor_depth_m(config, n, e)), rng.uniform(-np.pi, np.pi)) @ model.resting_poses[0]
+        yaw = rng.uniform(-np.pi, np.pi)
+        n, e = _on_flat_floor(config, model.mesh.vertices, model.resting_poses[0], n, e, yaw)
+        T = _T_world_rest(n, e, float(floor_depth_m(config, n, e)), yaw) @ model.resting_poses[0]
         truths.append(ObjectTruth(name=f"{label}_{i}", label=label, T_world_object=RigidTransform(T)))
         meshes.append(model.mesh.copy().apply_transform(T))
     if config.clutter:
