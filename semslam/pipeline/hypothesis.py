@@ -194,9 +194,36 @@ def _above_floor(cfg: Any, seg: SegmentationResult | None, points: np.ndarray, m
         return None
 
     def admissible(T_scanner_object: np.ndarray) -> bool:
-        return not plane_penetration_m(seg, points, model.points_object, T_scanner_object) > limit  # NaN passes
+        return within_planes(seg, points, model.points_object, T_scanner_object, limit)
 
     return admissible
+
+
+#: Rounding allowance of :func:`within_planes`'s bound (m): a pose whose deepest point comes this close to the limit
+#: gets the exact depth.
+BOUND_SLACK_M = 1e-9
+
+
+def within_planes(seg: SegmentationResult | None, cluster_points: np.ndarray, model_points_object: np.ndarray,
+                  T_scanner_object: np.ndarray, limit_m: float) -> bool:
+    """``not plane_penetration_m(...) > limit_m`` (NaN passes), the floor check's verdict, computed fast: behind
+    every removed plane the cluster lies on, the posed model's deepest point bounds the depth (the floor's is that
+    point's, a later plane's that of a deeper share of points), so a pose whose deepest point stays within the limit
+    passes without transforming the model or sorting its depths; only a pose reaching past it gets
+    :func:`plane_penetration_m` (the pose search asks this of every refined hypothesis: ~20 ms each on a model of
+    300 000 points, ~1 ms with the bound)."""
+    if seg is None or not seg.planes or not len(cluster_points) or not len(model_points_object):
+        return True
+    T = np.asarray(T_scanner_object, dtype=np.float64)
+    for plane in seg.planes:
+        n, d = plane.coefficients[:3], float(plane.coefficients[3])
+        nearest = float(np.min(cluster_points @ n + d))
+        if not -SUPPORT_PLANE_DISTANCE_M <= nearest <= SUPPORT_PLANE_DISTANCE_M:
+            continue
+        deepest = -(float(np.min(model_points_object @ (T[:3, :3].T @ n))) + float(T[:3, 3] @ n) + d)
+        if deepest > limit_m - BOUND_SLACK_M:
+            return not plane_penetration_m(seg, cluster_points, model_points_object, T) > limit_m  # NaN passes
+    return True
 
 
 def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, hyp: Hypothesis, *, seed: int,

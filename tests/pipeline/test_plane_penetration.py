@@ -171,3 +171,42 @@ def test_the_pose_search_is_told_that_a_pose_inside_the_floor_is_inadmissible(sc
     assert not admissible(_pose(FLOOR_Z + 0.05))
     assert _above_floor(PipelineConfig(), seg, cluster, model) is None
     assert _above_floor(PipelineConfig(verify_max_plane_penetration_m=0.01), None, cluster, model) is None
+
+
+def test_the_fast_verdict_equals_the_exact_depth_against_the_limit(monkeypatch):
+    """Catches the bound of ``within_planes`` (the deepest point) passing a pose the exact depth fails, or failing one
+    it passes: 400 random poses about the floor and a wall beside the disc, limits around their depths; and the exact
+    depth is computed only for poses whose deepest point reaches past the limit."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    import semslam.pipeline.hypothesis as H
+
+    disc = _disc(0.25, 0.022)
+    floor = SimpleNamespace(coefficients=np.array([0.0, 0.0, -1.0, FLOOR_Z]))
+    wall = SimpleNamespace(coefficients=np.array([-1.0, 0.0, 0.0, 0.239]))
+    top = _grid(-0.1, 0.1, -0.1, 0.1, FLOOR_Z - 0.022)
+    top[:, 0] += 0.135
+    rng = np.random.default_rng(7)
+    verdicts = []
+    for planes in ([floor, wall], [wall, floor], [floor]):
+        seg = SimpleNamespace(planes=planes)
+        for _ in range(400 // 3):
+            T = _pose(FLOOR_Z + rng.uniform(-0.01, 0.03))
+            T[:3, :3] = Rotation.from_rotvec(rng.normal(0.0, 0.05, 3)).as_matrix()
+            T[:2, 3] = rng.normal(0.0, 0.01, 2)
+            limit = rng.uniform(0.0, 0.03)
+            exact = not plane_penetration_m(seg, top, disc, T) > limit
+            assert H.within_planes(seg, top, disc, T, limit) == exact
+            verdicts.append(exact)
+    assert 0.2 < np.mean(verdicts) < 0.8  # both verdicts well represented
+    calls = []
+    monkeypatch.setattr(H, "plane_penetration_m", lambda *a: calls.append(a) or 0.0)
+    on_floor = SimpleNamespace(planes=[floor])
+    assert H.within_planes(on_floor, top, disc, _pose(FLOOR_Z - 0.005), 0.01) and not calls  # 5 mm above: bound only
+    H.within_planes(on_floor, top, disc, _pose(FLOOR_Z + 0.02), 0.01)  # 20 mm in: the exact depth
+    assert len(calls) == 1
+    H.within_planes(SimpleNamespace(planes=[floor, wall]), top, disc, _pose(FLOOR_Z - 0.005), 0.01)  # the wall's 11 mm
+    assert len(calls) == 2
+    assert H.within_planes(None, top, disc, _pose(FLOOR_Z + 0.05), 0.01)  # no segmentation: not judged
