@@ -206,23 +206,36 @@ BOUND_SLACK_M = 1e-9
 
 def within_planes(seg: SegmentationResult | None, cluster_points: np.ndarray, model_points_object: np.ndarray,
                   T_scanner_object: np.ndarray, limit_m: float) -> bool:
-    """``not plane_penetration_m(...) > limit_m`` (NaN passes), the floor check's verdict, computed fast: behind
-    every removed plane the cluster lies on, the posed model's deepest point bounds the depth (the floor's is that
-    point's, a later plane's that of a deeper share of points), so a pose whose deepest point stays within the limit
-    passes without transforming the model or sorting its depths; only a pose reaching past it gets
-    :func:`plane_penetration_m` (the pose search asks this of every refined hypothesis: ~20 ms each on a model of
-    300 000 points, ~1 ms with the bound)."""
+    """``not plane_penetration_m(...) > limit_m`` (NaN passes), the floor check's verdict, computed fast. Behind each
+    removed plane the cluster lies on, the posed model's depths come from one matrix-vector product (no transformed
+    model, no sort): the floor's depth is the deepest point's, a later plane's the :data:`PENETRATION_SHARE` quantile,
+    decided by counting the points deeper than the limit. Only a depth within :data:`BOUND_SLACK_M` of the limit
+    (where the two products' rounding could differ) gets :func:`plane_penetration_m`. The pose search asks this of
+    every refined hypothesis: ~20 ms each on a model of 300 000 points before, ~3 ms now."""
     if seg is None or not seg.planes or not len(cluster_points) or not len(model_points_object):
         return True
     T = np.asarray(T_scanner_object, dtype=np.float64)
-    for plane in seg.planes:
+    exact = lambda: not plane_penetration_m(seg, cluster_points, model_points_object, T) > limit_m  # noqa: E731
+    for k, plane in enumerate(seg.planes):
         n, d = plane.coefficients[:3], float(plane.coefficients[3])
         nearest = float(np.min(cluster_points @ n + d))
         if not -SUPPORT_PLANE_DISTANCE_M <= nearest <= SUPPORT_PLANE_DISTANCE_M:
             continue
-        deepest = -(float(np.min(model_points_object @ (T[:3, :3].T @ n))) + float(T[:3, 3] @ n) + d)
-        if deepest > limit_m - BOUND_SLACK_M:
-            return not plane_penetration_m(seg, cluster_points, model_points_object, T) > limit_m  # NaN passes
+        signed = model_points_object @ (T[:3, :3].T @ n) + (float(T[:3, 3] @ n) + d)
+        deepest = -float(np.min(signed))
+        if deepest <= limit_m - BOUND_SLACK_M:
+            continue  # the deepest point bounds the depth behind this plane
+        if k == 0:
+            if deepest > limit_m + BOUND_SLACK_M:
+                return False
+            return exact()
+        # np.quantile's linear interpolation lies between the sorted depths lo and lo + 1
+        lo = int(np.floor(PENETRATION_SHARE * (len(signed) - 1)))
+        if np.count_nonzero(signed < -(limit_m + BOUND_SLACK_M)) >= lo + 2:
+            return False  # both beyond the limit
+        if np.count_nonzero(signed < -(limit_m - BOUND_SLACK_M)) <= lo:
+            continue  # the lower one within it
+        return exact()
     return True
 
 
