@@ -129,6 +129,21 @@ def run_seed(models_dir: Path | None, seed: int, out: Path, *, quick: bool, db_s
     return rows
 
 
+def run_seeds(models_dir: Path | None, seeds: list[int], out: Path, **kw) -> tuple[dict, dict]:
+    """:func:`run_seed` for each of ``seeds`` (``OUT/seed_<s>``), each seed's table printed, then the pooled one:
+    ``({seed: table}, pooled table)``."""
+    all_rows, per_seed = [], {}
+    for s in seeds:
+        t0 = time.perf_counter()
+        rows = run_seed(models_dir, s, out / f"seed_{s}", **kw)
+        all_rows += rows
+        per_seed[s] = per_class_table(rows)
+        print_table(per_seed[s], f"seed {s} ({time.perf_counter() - t0:.0f} s)")
+    total = per_class_table(all_rows)
+    print_table(total, f"seeds {seeds} pooled")
+    return per_seed, total
+
+
 def per_class_table(rows: list[dict]) -> dict:
     """Per class (and ``all``): precision, recall, median pose errors, mean NEES (6-DoF and 3-DoF rows apart)."""
     labels = sorted({r["truth_label"] for r in rows if r["truth_object"] >= 0 and r["truth_label"] != "background"}
@@ -201,16 +216,8 @@ def main(argv: list[str] | None = None) -> int:
                                                                        models_dir=args.models_dir)
     if used:
         print("models: " + ", ".join(f"{k}={v}" for k, v in used.items()))
-    all_rows, per_seed = [], {}
-    for s in args.seeds:
-        t0 = time.perf_counter()
-        rows = run_seed(folder, s, out / f"seed_{s}", quick=args.quick, db_sensor=args.db_sensor, preset=args.preset,
-                        config_file=args.config)
-        all_rows += rows
-        per_seed[s] = per_class_table(rows)
-        print_table(per_seed[s], f"seed {s} ({time.perf_counter() - t0:.0f} s)")
-    total = per_class_table(all_rows)
-    print_table(total, f"seeds {args.seeds} pooled")
+    per_seed, total = run_seeds(folder, args.seeds, out, quick=args.quick, db_sensor=args.db_sensor,
+                                preset=args.preset, config_file=args.config)
     never = sorted(set(used) - set(total))
     if never:  # in the mission, but no scan ever made a cluster of them: misses the per-cluster recall cannot count
         print(f"never a cluster (not counted above): {', '.join(never)}")

@@ -33,13 +33,12 @@ import argparse
 import json
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from real_models import per_class_table, print_table, run_seed  # noqa: E402
+from real_models import run_seeds  # noqa: E402
 
 MODELS_TOML = """# six subsea parts from published or typical dimensions (benchmarks/unseen_parts.py)
 [weldneck_flange]
@@ -186,16 +185,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="semslam_unseen_parts_"))
     folder = write_parts(out / "models")
-    all_rows, per_seed = [], {}
-    for s in args.seeds:
-        t0 = time.perf_counter()
-        rows = run_seed(folder, s, out / f"seed_{s}", quick=True, db_sensor=args.db_sensor, preset=args.preset,
-                        config_file=args.config)
-        all_rows += rows
-        per_seed[s] = per_class_table(rows)
-        print_table(per_seed[s], f"seed {s} ({time.perf_counter() - t0:.0f} s)")
-    total = per_class_table(all_rows)
-    print_table(total, f"seeds {args.seeds} pooled")
+    per_seed, total = run_seeds(folder, args.seeds, out, quick=True, db_sensor=args.db_sensor, preset=args.preset,
+                                config_file=args.config)
     (out / "summary.json").write_text(json.dumps({"seeds": args.seeds, "per_seed": per_seed, "pooled": total},
                                                  indent=2, default=float))
     print(f"\nrun directories and summary.json in {out}")
