@@ -257,7 +257,13 @@ def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points:
 def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], eligible: list[int],
                        seed: int, timings: dict) -> list[tuple]:
     """The candidate unions of the ``eligible`` clusters that are recognised, verified and whose every part fits:
-    ``(points, fitness, cluster indices, detection, match, extent, touches border)`` each, in the order tried."""
+    ``(points, fitness, cluster indices, detection, match, extent, touches border)`` each.
+
+    :func:`merge_parts` keeps them greedily, the most points first (then the best fitness), none sharing a cluster
+    with one kept before. The candidates are tried in that order, so a union sharing a cluster with one already
+    kept from a union of more points is not tried at all (it could never be kept): the same unions are kept as when
+    every candidate is tried, without posing those (each pose searches a grid of starts: most of a scan's time in
+    a scene of parts). Unions of as many points are all tried before any of them is kept (the fitness decides)."""
     cfg = rec.config
     pcfg: PartsConfig = cfg.parts
     tolerance = float(seg.resolved.get("cluster_tolerance_m") or cfg.segmentation.cluster_tolerance_m)
@@ -265,51 +271,101 @@ def _recognized_unions(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clus
     limits = _gap_limits(rec, tolerance)
     gaps = _gaps(pts, max(limits.values()))
     unions = _candidate_unions(len(eligible), gaps, pcfg)
-    max_plausible = rec.max_plausible_extent_m()
-    min_part = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
-    accepted = []
-    for u, members in enumerate(unions):
-        ks = [eligible[i] for i in members]
-        if all(outcomes[k].detection is not None for k in ks):
-            continue  # recognised parts only: each has its detection (PartsConfig.detected_parts)
-        idx = np.concatenate([seg.cluster_indices[k] for k in ks])
-        cloud = seg.segmented_cloud.select(idx)
-        extent = principal_extent(np.ascontiguousarray(cloud.points_xyz_m, dtype=np.float64))
-        if extent[0] > max_plausible:
-            _log.debug("union %s: extent %.3f m too big", ks, extent[0])
+    raw = {k: _input_indices(seg, k) for k in eligible}
+    members = [[eligible[i] for i in m] for m in unions]
+
+    def evaluate(u: int) -> tuple | None:
+        return _recognized_union(rec, ctx, seg, outcomes, members[u], [raw[k] for k in members[u]], gaps, unions[u],
+                                 limits, seed + u, timings)
+
+    return tried_in_keeping_order([sum(len(raw[k]) for k in m) for m in members], members, evaluate)
+
+
+def kept_unions(accepted: list[tuple]) -> list[tuple]:
+    """The entries of ``accepted`` (``(points, fitness, clusters, ...)``) :func:`merge_parts` keeps: the most points
+    first, then the best fitness (then the order given), none sharing a cluster with one kept before."""
+    used: set[int] = set()
+    out = []
+    for entry in sorted(accepted, key=lambda a: (-a[0], -a[1])):
+        if not used & set(entry[2]):
+            used |= set(entry[2])
+            out.append(entry)
+    return out
+
+
+def tried_in_keeping_order(n_points: list[int], members: list[list[int]], evaluate) -> list[tuple]:
+    """``evaluate(u)`` (an entry ``(points, fitness, clusters, ...)`` with ``points == n_points[u]``, or None) of the
+    candidate unions in the order :func:`kept_unions` keeps them (the most points first, then the order given),
+    skipping a candidate that shares a cluster with an entry kept among more points: it could never be kept. Unions
+    of as many points are all evaluated before any is kept (the fitness decides among them). ``kept_unions`` of the
+    result equals ``kept_unions`` of every candidate's entry."""
+    accepted, group, kept = [], [], set()
+
+    def keep_group() -> None:
+        for entry in kept_unions(group):
+            kept.update(entry[2])
+        accepted.extend(group)
+        group.clear()
+
+    for u in sorted(range(len(members)), key=lambda u: (-n_points[u], u)):
+        if group and n_points[u] != group[-1][0]:
+            keep_group()
+        if kept & set(members[u]):
+            _log.debug("union %s: shares a cluster with a union of more points kept", members[u])
             continue
-        try:
-            desc = rec.db.describe(cloud, seed=seed + u)
-        except DescriptorError:
-            continue
-        match, label, view_index = rec.classify(desc)
-        if label == UNKNOWN_LABEL:
-            _log.debug("union %s: unknown (nearest %s, distance %.3g > %.3g)", ks, match.nearest_label, match.distance,
-                       match.threshold)
-            continue
-        if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
-            _log.debug("union %s: extent %.3f m too big for %s", ks, extent[0], label)
-            continue
-        if _widest_gap(members, gaps) > limits[label]:
-            _log.debug("union %s: its parts too far apart for %s", ks, label)
-            continue
-        raw = [_input_indices(seg, k) for k in ks]
-        raw_idx = np.sort(np.concatenate(raw))
-        border = any(outcomes[k].touches_border for k in ks)
-        hyp = Hypothesis(raw_idx, cloud, label, view_index, match, border, union=True)
-        det = pose_and_verify(rec, ctx, seg, hyp,
-                              seed=seed + u, timings=timings, what=f"union {ks}",
-                              scene_visibility_cost=pcfg.scene_visibility)
-        if det is None:
-            continue
-        fits = _part_fitness(rec, det, label, view_index, [ctx.scan.points_xyz_m[r] for r in raw])
-        if min(fits) < min_part:
-            _log.debug("union %s: %s, a part off the surface (part fitness %s)", ks, label, np.round(fits, 3))
-            continue
-        det.extras["parts"] = [int(k) for k in ks]
-        det.extras["part_fitness"] = fits
-        accepted.append((len(raw_idx), det.fitness, ks, det, match, extent, border))
+        entry = evaluate(u)
+        if entry is not None:
+            group.append(entry)
+    keep_group()
     return accepted
+
+
+def _recognized_union(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], ks: list[int],
+                      raw: list[np.ndarray], gaps: dict, members: tuple, limits: dict, seed: int,
+                      timings: dict) -> tuple | None:
+    """Union ``ks`` (clusters; ``members`` their positions among the eligible ones, ``raw`` their input indices)
+    recognised, posed and verified with every part on the surface: its entry of :func:`_recognized_unions`, or
+    None."""
+    cfg = rec.config
+    pcfg: PartsConfig = cfg.parts
+    min_part = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
+    if all(outcomes[k].detection is not None for k in ks):
+        return None  # recognised parts only: each has its detection (PartsConfig.detected_parts)
+    idx = np.concatenate([seg.cluster_indices[k] for k in ks])
+    cloud = seg.segmented_cloud.select(idx)
+    extent = principal_extent(np.ascontiguousarray(cloud.points_xyz_m, dtype=np.float64))
+    if extent[0] > rec.max_plausible_extent_m():
+        _log.debug("union %s: extent %.3f m too big", ks, extent[0])
+        return None
+    try:
+        desc = rec.db.describe(cloud, seed=seed)
+    except DescriptorError:
+        return None
+    match, label, view_index = rec.classify(desc)
+    if label == UNKNOWN_LABEL:
+        _log.debug("union %s: unknown (nearest %s, distance %.3g > %.3g)", ks, match.nearest_label, match.distance,
+                   match.threshold)
+        return None
+    if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
+        _log.debug("union %s: extent %.3f m too big for %s", ks, extent[0], label)
+        return None
+    if _widest_gap(members, gaps) > limits[label]:
+        _log.debug("union %s: its parts too far apart for %s", ks, label)
+        return None
+    raw_idx = np.sort(np.concatenate(raw))
+    border = any(outcomes[k].touches_border for k in ks)
+    hyp = Hypothesis(raw_idx, cloud, label, view_index, match, border, union=True)
+    det = pose_and_verify(rec, ctx, seg, hyp, seed=seed, timings=timings, what=f"union {ks}",
+                          scene_visibility_cost=pcfg.scene_visibility)
+    if det is None:
+        return None
+    fits = _part_fitness(rec, det, label, view_index, [ctx.scan.points_xyz_m[r] for r in raw])
+    if min(fits) < min_part:
+        _log.debug("union %s: %s, a part off the surface (part fitness %s)", ks, label, np.round(fits, 3))
+        return None
+    det.extras["parts"] = [int(k) for k in ks]
+    det.extras["part_fitness"] = fits
+    return len(raw_idx), det.fitness, ks, det, match, extent, border
 
 
 def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], detections: list[Detection], *,
@@ -327,11 +383,7 @@ def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutc
     if len(eligible) < 2:
         return outcomes, detections
     accepted = _recognized_unions(rec, ctx, seg, outcomes, eligible, seed, timings)
-    used: set[int] = set()
-    for _, _, ks, det, match, extent, border in sorted(accepted, key=lambda a: (-a[0], -a[1])):
-        if used & set(ks):
-            continue
-        used |= set(ks)
+    for _, _, ks, det, match, extent, border in kept_unions(accepted):
         replaced = [outcomes[k].detection for k in ks if outcomes[k].detection is not None]
         detections = [d for d in detections if not any(d is r for r in replaced)] + [det]
         reason = (f"detected as a union of clusters {ks}" + ("" if det.reliable else " (unreliable pose)")
