@@ -135,6 +135,15 @@ SUPPORT_PLANE_DISTANCE_M = 0.05
 PENETRATION_SHARE = 0.02
 
 
+def _supporting_planes(seg: SegmentationResult, cluster_points: np.ndarray):
+    """``(k, unit normal, d)`` of each removed plane (in removal order) the cluster lies on: its nearest point within
+    :data:`SUPPORT_PLANE_DISTANCE_M` of it."""
+    for k, plane in enumerate(seg.planes):
+        n, d = plane.coefficients[:3], float(plane.coefficients[3])
+        if -SUPPORT_PLANE_DISTANCE_M <= float(np.min(cluster_points @ n + d)) <= SUPPORT_PLANE_DISTANCE_M:
+            yield k, n, d
+
+
 def plane_penetration_m(seg: SegmentationResult | None, cluster_points: np.ndarray, model_points_object: np.ndarray,
                         T_scanner_object: np.ndarray) -> float:
     """How far the posed model reaches behind the removed planes the cluster lies on (metres, >= 0), NaN when no
@@ -154,11 +163,7 @@ def plane_penetration_m(seg: SegmentationResult | None, cluster_points: np.ndarr
     T = np.asarray(T_scanner_object, dtype=np.float64)
     model = model_points_object @ T[:3, :3].T + T[:3, 3]
     depth = float("nan")
-    for k, plane in enumerate(seg.planes):
-        n, d = plane.coefficients[:3], float(plane.coefficients[3])
-        nearest = float(np.min(cluster_points @ n + d))
-        if not -SUPPORT_PLANE_DISTANCE_M <= nearest <= SUPPORT_PLANE_DISTANCE_M:
-            continue  # the cluster does not lie on this plane
+    for k, n, d in _supporting_planes(seg, cluster_points):
         signed = model @ n + d
         behind = max(-float(np.min(signed) if k == 0 else np.quantile(signed, PENETRATION_SHARE)), 0.0)
         depth = behind if depth != depth else max(depth, behind)
@@ -216,11 +221,7 @@ def within_planes(seg: SegmentationResult | None, cluster_points: np.ndarray, mo
         return True
     T = np.asarray(T_scanner_object, dtype=np.float64)
     exact = lambda: not plane_penetration_m(seg, cluster_points, model_points_object, T) > limit_m  # noqa: E731
-    for k, plane in enumerate(seg.planes):
-        n, d = plane.coefficients[:3], float(plane.coefficients[3])
-        nearest = float(np.min(cluster_points @ n + d))
-        if not -SUPPORT_PLANE_DISTANCE_M <= nearest <= SUPPORT_PLANE_DISTANCE_M:
-            continue
+    for k, n, d in _supporting_planes(seg, cluster_points):
         signed = model_points_object @ (T[:3, :3].T @ n) + (float(T[:3, 3] @ n) + d)
         deepest = -float(np.min(signed))
         if deepest <= limit_m - BOUND_SLACK_M:
