@@ -91,6 +91,11 @@ class PartsConfig:
         passes replaces the detections of its parts: a gate valve's body alone verifies as a blind flange (its end
         flange), and the union with its handwheel is the gate valve. Default False (on in the ``cluttered`` and
         ``seabed`` presets).
+    fragments : bool
+        After the unions, a cluster still unknown whose points lie on the surface of an object recognised in the
+        same scan (at least ``min_part_fitness`` of them within ``PoseConfig.icp_max_correspondence_m`` of its
+        posed model) is reported as a fragment of that object (:mod:`semslam.pipeline.fragments`): it gets the
+        detection's class and its one detection, whose pose is unchanged. Default True.
     """
 
     max_gap_factor: float = 3.5
@@ -101,6 +106,7 @@ class PartsConfig:
     scene_visibility: bool = False
     view_gaps: bool = False
     detected_parts: bool = False
+    fragments: bool = True
 
     def __post_init__(self) -> None:
         c = "PartsConfig"
@@ -108,7 +114,7 @@ class PartsConfig:
         check_int("max_candidates", self.max_candidates, caller=c, minimum=1)
         check_int("max_parts", self.max_parts, caller=c, minimum=2, maximum=4)
         check_int("max_unions", self.max_unions, caller=c, minimum=1)
-        for name in ("scene_visibility", "view_gaps", "detected_parts"):
+        for name in ("scene_visibility", "view_gaps", "detected_parts", "fragments"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"The {name!r} argument of {c} must be a bool. "
                                  f"Got {getattr(self, name)!r} instead.")

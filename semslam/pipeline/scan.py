@@ -19,7 +19,8 @@ models of each class) is prepared once, in the constructor or lazily on first us
    -> describe -> match (nearest view, unknown rejection, size of the class) -> pose
    (:func:`~.hypothesis.pose_hypothesis`) -> verify (:func:`~.hypothesis.verification_failure`);
 4. the opt-in stages on what is left unknown: :func:`~.attached.find_attached` (objects attached to structure),
-   :func:`~.parts.merge_parts` (objects in several clusters).
+   :func:`~.parts.merge_parts` (objects in several clusters), then :func:`~.fragments.absorb_fragments` (pieces
+   of an object recognised in the scan, ``PartsConfig.fragments``).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from ..segmentation.scene import SegmentationResult
 from .attached import find_attached
 from .class_measures import class_size_limit_m, median_view_area_m2
 from .config import PipelineConfig
+from .fragments import absorb_fragments
 from .parts import merge_parts
 from .scan_records import ClusterOutcome, scan_context
 from .stages import recognize_clusters, segment
@@ -247,6 +249,8 @@ class ScanRecognizer:
         if cfg.parts is not None:  # unknown clusters near each other tried as one object
             outcomes, detections = merge_parts(self, ctx, seg, outcomes, detections,
                                                seed=ctx.cluster_seed + len(seg.clusters), timings=timings)
+            if cfg.parts.fragments:  # pieces of an object recognised in this scan
+                outcomes = absorb_fragments(self, ctx, seg, outcomes, detections, timings=timings)
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return RecognitionResult(detections, outcomes, seg, timings)
 
