@@ -102,6 +102,10 @@ CONFIGS = {
     # the seabed preset's pipeline section as it is (semslam.run.config.PRESETS); its up_from_attitude is --upright
     "seabed": {f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
                if f.name not in ("descriptor", "classifier")},
+    # seabed with a border-cut cluster's pose search against the whole scan (session 27; not adopted: seed 2's
+    # precision 95.3 -> 93.6 %)
+    "seabed_border_scene": {**{f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
+                               if f.name not in ("descriptor", "classifier")}, "pose_border_scene": True},
     "catalogue_border_unionscene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                     "size_reference": "principal", "parts": PartsConfig(scene_visibility=True),
                                     "verify_visibility_image": "border"},

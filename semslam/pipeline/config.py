@@ -86,6 +86,12 @@ class PipelineConfig:
         was seen as half a wheel and posed half-turned with a confident covariance (``benchmarks/real_models.py``
         seeds 0 and 3: the wheel valve's mean 6-DoF NEES 154 and 123, with this 4.1 and 4.7). Off by default; on in
         the ``seabed`` preset.
+    pose_border_scene : bool
+        For a cluster cut by the scan's border, the pose search's visibility term uses the whole scan about the
+        cluster (``estimate_object_pose(scene_scanner=...)``, as ``verify_visibility_image="scene"`` verifies): the
+        part of the object beyond the border, which the scanner never looked at, is unknown there, where the
+        cluster's own image counts it as a contradiction and favours a pose that tucks the model into the swath.
+        Off by default.
     estimate_pose : bool
         False stops after recognition (detections then carry an identity pose and an infinite-like covariance).
     ambiguous_rotation_variance_rad2 : float
@@ -183,6 +189,7 @@ class PipelineConfig:
     pose: PoseConfig = field(default_factory=PoseConfig)
     estimate_pose: bool = True
     pose_surroundings: bool = False
+    pose_border_scene: bool = False
     ambiguous_rotation_variance_rad2: float = 0.25
     up_scanner: tuple | None = None
     verify_min_fitness: float | None = None
@@ -198,9 +205,10 @@ class PipelineConfig:
 
     def __post_init__(self) -> None:
         c = "PipelineConfig"
-        if not isinstance(self.pose_surroundings, bool):
-            raise InputError(f"The 'pose_surroundings' argument of {c} must be true or false. "
-                             f"Got {self.pose_surroundings!r} instead.")
+        for name in ("pose_surroundings", "pose_border_scene"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"The {name!r} argument of {c} must be true or false. "
+                                 f"Got {getattr(self, name)!r} instead.")
         if not isinstance(self.verify_camera_shadows, bool):
             raise InputError(f"The 'verify_camera_shadows' argument of {c} must be true or false. "
                              f"Got {self.verify_camera_shadows!r} instead.")

@@ -80,6 +80,17 @@ def verification_failure(det: Detection, min_fitness: float | None, max_visibili
     return ""
 
 
+def _scene_of(seg: SegmentationResult | None, points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(scene, occluders)`` for the pose search of a border-cut cluster (``PipelineConfig.pose_border_scene``): the
+    segmented scan (planes included) and its clusters with ``points``, as :func:`scene_visibility` uses them; None
+    without a segmentation."""
+    if seg is None:
+        return None
+    cloud = seg.segmented_cloud.points_xyz_m
+    objects = cloud[np.concatenate(seg.cluster_indices)] if seg.cluster_indices else cloud[:0]
+    return cloud, np.vstack([objects, points])
+
+
 def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult | None, points: np.ndarray,
                      model: Any, T_scanner_object: Any) -> float:
     """The visibility cost of a pose against the whole scan about the cluster (``verify_visibility_image="scene"``,
@@ -93,10 +104,9 @@ def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult
     if seg is None:  # no segmentation given: the raw scan, any surface may hide
         image = RangeImage.build_scene(scan.points_xyz_m, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m)
     else:
-        cloud = seg.segmented_cloud.points_xyz_m
-        objects = cloud[np.concatenate(seg.cluster_indices)] if seg.cluster_indices else cloud[:0]
+        cloud, occluders = _scene_of(seg, points)
         image = RangeImage.build_scene(cloud, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m,
-                                       occluder_points=np.vstack([objects, points]))
+                                       occluder_points=occluders)
     image = image.with_camera(pc.camera_offset_m)
     T_os = np.linalg.inv(T_scanner_object.matrix)
     return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
@@ -268,7 +278,9 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
                                 is not None else None, up_object=up_object,
                                 partial=bool(hyp.touches_border or hyp.union),
                                 surroundings_scanner=surroundings(seg, points, model.radius_m)
-                                if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model))
+                                if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model),
+                                scene_scanner=_scene_of(seg, points) if cfg.pose_border_scene and hyp.touches_border
+                                else None)
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

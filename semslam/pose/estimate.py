@@ -32,6 +32,7 @@ from ..registration.ambiguity import half_turns
 from ..registration.coarse import align_prerejective
 from ..registration.result import RegistrationResult
 from ..registration.upright import upright_rotations
+from ._search_inputs import checked_search_inputs
 from .covariance import calibration_of, pose_covariance, widen_untrusted
 from .icp_refine import (  # noqa: F401 (_final_score, _icp_field_nearest: tests use them here)
     _final_score, _final_scores, _icp_field_nearest, _icp_small_gicp, _refine, _small_gicp_T, back_facing_shares)
@@ -130,6 +131,7 @@ def estimate_object_pose(
     partial: bool = False,
     surroundings_scanner: Any = None,
     admissible: Any = None,
+    scene_scanner: Any = None,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -154,24 +156,24 @@ def estimate_object_pose(
     canonical_reference : optional
         Passed to :meth:`Symmetry.canonicalize` (rotation for discrete, direction for continuous; scanner frame).
     init_T_scanner_object : array-like (4, 4) or RigidTransform, optional
-        A prior pose (e.g. predicted from the map by the SLAM): the global search is skipped and ICP
-        starts from it.
+        A prior pose (e.g. predicted from the map by the SLAM): the global search is skipped, ICP starts from it.
     up_scanner, up_object : array-like (3,), optional
-        The up direction in the scanner frame (from the vehicle's attitude, a level camera) and in the
-        object frame (recorded by ``db build --fuse --up``). Given both, the grid search scans only
-        orientations that keep them within a few degrees of each other
-        (:func:`~semslam.registration.upright.upright_rotations`) instead of all of SO(3): an object cannot be
-        found upside down. ``up_object`` may be several directions (k, 3): a part that rests on either face;
-        the orientations keeping any of them up are scanned, and a near-equal fit of another one makes the
-        pose ambiguous.
+        The up direction in the scanner frame (the vehicle's attitude, a level camera) and in the object frame
+        (``db build --fuse --up``). Given both, the grid search scans only orientations that keep them within a few
+        degrees of each other (:func:`~semslam.registration.upright.upright_rotations`), not all of SO(3).
+        ``up_object`` may be several directions (k, 3) (a part resting on either face): a near-equal fit of another
+        one makes the pose ambiguous.
     partial : bool
-        Only part of the object (cut by the scan's border, or a union of clusters): the grid search also starts
-        the translation on a grid across the object (``PoseConfig.partial_start_step_m``; off at 0).
+        Only part of the object (border-cut, a union of clusters): the grid search also starts the translation on a
+        grid across the object (``PoseConfig.partial_start_step_m``; off at 0).
     surroundings_scanner : array-like (K, 3), optional
-        The scan's other objects about the cluster: seen surfaces for the grid search's visibility term (not for
-        the verdict's), ``PipelineConfig.pose_surroundings``: an object split in two is not posed to hide a part.
+        The scan's other objects about the cluster: seen surfaces for the search's visibility term (not the
+        verdict's), ``PipelineConfig.pose_surroundings``.
     admissible : callable, optional
         A test of ``T_scanner_object`` (4, 4) -> bool (the floor check): see :func:`.selection.admissible_alternative`.
+    scene_scanner : pair of array-likes (S, 3), (K, 3), optional
+        The whole scan and its objects, for a border-cut cluster: the search's visibility term (not the verdict's)
+        uses the scene's image, where the model beyond the border is unknown (``PipelineConfig.pose_border_scene``).
 
     Returns
     -------
@@ -182,8 +184,7 @@ def estimate_object_pose(
     RegistrationError
         When the cluster has fewer than ``config.min_points`` points.
     InputError
-        On a ``symmetry`` that is not a Symmetry, a badly shaped cluster or viewpoint, only one of the up
-        directions, or a model prepared without what the chosen method needs.
+        On a bad ``symmetry``, cluster, viewpoint or search input, one up direction only, a model unprepared.
     """
     t0 = time.perf_counter()
     model = model_points_object if isinstance(model_points_object, PoseModel) else \
@@ -193,20 +194,8 @@ def estimate_object_pose(
     cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
     t1 = time.perf_counter()
     alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
-                               *_checked_search_inputs(partial, surroundings_scanner, admissible))
+                               *checked_search_inputs(partial, surroundings_scanner, admissible, scene_scanner))
     return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
-
-
-def _checked_search_inputs(partial: Any, surroundings_scanner: Any, admissible: Any) -> tuple:
-    """``partial`` as a bool, ``surroundings_scanner`` as an (K, 3) array (or None) and ``admissible``, checked."""
-    if not isinstance(partial, (bool, np.bool_)):
-        raise InputError(f"The 'partial' argument of {_CALLER} must be true or false. Got {partial!r} instead.")
-    if admissible is not None and not callable(admissible):
-        raise InputError(f"The 'admissible' argument of {_CALLER} must be a function of a 4x4 pose or None. "
-                         f"Got {type(admissible).__name__} instead.")
-    surroundings = None if surroundings_scanner is None else \
-        as_float_array("surroundings_scanner", surroundings_scanner, (None, 3), caller=_CALLER)
-    return bool(partial), surroundings, admissible
 
 
 @dataclass
@@ -252,7 +241,7 @@ def _checked_cluster(
 
 def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
                    init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False,
-                   surroundings: np.ndarray | None = None, admissible: Any = None) -> _Alignment:
+                   surroundings: np.ndarray | None = None, admissible: Any = None, scene: Any = None) -> _Alignment:
     """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
     the grid search with ICP of its best hypotheses (the default)."""
     nan = float("nan")
@@ -280,7 +269,7 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
     fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial,
-                                                          surroundings, admissible)
+                                                          surroundings, admissible, scene)
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 
 
@@ -309,7 +298,7 @@ def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Sy
 
 
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None,
-                 partial: bool = False, surroundings: np.ndarray | None = None, admissible=None):
+                 partial: bool = False, surroundings: np.ndarray | None = None, admissible=None, scene=None):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -330,7 +319,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m
         else (), camera_offset_m=cfg.camera_offset_m, partial_step_m=cfg.partial_start_step_m if partial else 0.0,
-        surroundings=surroundings)
+        surroundings=surroundings, scene=scene)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m
@@ -375,8 +364,8 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
               "_alternatives": distinct}
     # the verdict's visibility is the cluster's own: the surroundings choose between the hypotheses, they do not make
     # a pose more trustworthy (a wrong pose overlapping the rest of the object would otherwise look clean)
-    vis = best[2] if surroundings is None or not len(surroundings) else _cluster_visibility(pts, vp, model, cfg,
-                                                                                             best[3], cluster)
+    own = scene is None and (surroundings is None or not len(surroundings))
+    vis = best[2] if own else _cluster_visibility(pts, vp, model, cfg, best[3], cluster)
     return final, vis, margin, extras, t2, nearest
 
 

@@ -131,7 +131,7 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
                       start_separation_m: float = 0.015, local_steps_rad: tuple = (),
                       camera_offset_m: tuple | None = None, partial_step_m: float = 0.0,
-                      surroundings: np.ndarray | None = None) -> tuple[list[Hypothesis], RangeImage]:
+                      surroundings: np.ndarray | None = None, scene: tuple | None = None) -> tuple[list, RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of ``n_coarse_points`` of
     the points ranks all orientations; the ``n_candidates`` best are aligned, fitted with all, get the visibility.
@@ -152,12 +152,11 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     only by :data:`PARTIAL_DEPTH_MARGIN`, and the best start of the best orientation at another depth is returned
     last as its ``depth_twin`` (:func:`_depth_twin`) when it fits within that margin. The visibility term's range
     image is that of ``points``, with ``surroundings`` (K, 3: the scan's other objects about the cluster) entered
-    on its grid.
+    on its grid, or :meth:`RangeImage.build_scene` of a ``scene`` (scene, occluder points; beyond the border unknown).
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
-    3 x 3 x 3 grid of rotations per step (:func:`_local_refine`); the refined hypothesis is returned right after its
-    original when it differs (both are worth an ICP: on a border-cut butterfly valve the refined start scored better
-    but its ICP ended worse).
+    3 x 3 x 3 grid of rotations per step (:func:`_local_refine`), returned right after its original when it differs
+    (both are worth an ICP: on a border-cut butterfly valve the refined start scored better, its ICP ended worse).
     """
     c = points.mean(axis=0)
     view = viewpoint - c
@@ -180,8 +179,9 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                             float(tau_m))
     # the visibility term on the n_candidates best fits only (it costs ~model size per hypothesis)
     cand = np.argsort(fit, kind="stable")[:n_candidates]
-    image = RangeImage.build(points, viewpoint, cell_m=image_cell_m,
-                             extra_points=surroundings).with_camera(camera_offset_m)
+    image = (RangeImage.build(points, viewpoint, cell_m=image_cell_m, extra_points=surroundings) if scene is None
+             else RangeImage.build_scene(scene[0], viewpoint, points, cell_m=image_cell_m, occluder_points=scene[1])
+             ).with_camera(camera_offset_m)
     vis = image.visibility_cost(Rs[cand], ts[cand], model_vis_pts, model_vis_nrm, visibility_tol_m)
     score = fit[cand] + visibility_weight * vis
     order = np.argsort(score, kind="stable")

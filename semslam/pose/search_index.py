@@ -101,6 +101,9 @@ class RangeImage:
     #: the camera of a triangulation laser scanner (3,), same frame as ``viewpoint`` (None: one viewpoint, as a lidar
     #: or a depth camera): :meth:`visibility_cost` expects no return where the camera cannot see the laser's spot
     camera: np.ndarray | None = None
+    #: a cell that saw nothing contradicts a model point there (the cluster's own image); False for
+    #: :meth:`build_scene`'s image of the whole scan, where it is unknown (the scanner did not look there)
+    unseen_bad: bool = True
 
     @classmethod
     def build(cls, points: np.ndarray, viewpoint: np.ndarray, *, cell_m: float, margin_m: float = 0.1,
@@ -159,7 +162,7 @@ class RangeImage:
         sd = np.linalg.norm(sr, axis=1)
         inside = (sd > 0.0) & (sr @ z > np.cos(min(half, 0.5 * np.pi - 1e-3)) * sd)
         pts = scene[inside] if inside.any() else np.asarray(around_points, dtype=np.float64)
-        img = cls.build(pts, vp, cell_m=cell_m, margin_m=0.0, dilate=dilate)
+        img = replace(cls.build(pts, vp, cell_m=cell_m, margin_m=0.0, dilate=dilate), unseen_bad=False)
         if occluder_points is None:
             return img
         occ = np.asarray(occluder_points, dtype=np.float64) - vp
@@ -170,12 +173,13 @@ class RangeImage:
         nu, nv = img.range_min.shape
         ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < nu) & (ij[:, 1] < nv)
         occ_img = K.range_image(ij[ok], np.linalg.norm(occ[front][ok], axis=1), int(nu), int(nv), max(int(dilate), 0))
-        return cls(img.viewpoint, img.F, img.u0, img.v0, img.cell, img.range_min, occ_img)
+        return cls(img.viewpoint, img.F, img.u0, img.v0, img.cell, img.range_min, occ_img, unseen_bad=False)
 
     def visibility_cost(self, Rs: np.ndarray, ts: np.ndarray, model_pts: np.ndarray, model_nrm: np.ndarray,
-                        tol_m: float, *, unseen_is_contradiction: bool = True) -> np.ndarray:
+                        tol_m: float, *, unseen_is_contradiction: bool | None = None) -> np.ndarray:
         """Share (H,) of the model points predicted visible under each hypothesis that contradict the scan. With
-        ``unseen_is_contradiction`` False (an image of the scene, :meth:`build_scene`), model points where the
+        ``unseen_is_contradiction`` False (default: not :attr:`unseen_bad`, as for an image of the scene,
+        :meth:`build_scene`), model points where the
         scanner saw nothing are left out, and those behind what it saw are hidden (behind an object, when the image
         has ``occluder_min``), not contradictions."""
         return K.visibility_cost(
@@ -190,7 +194,7 @@ class RangeImage:
             1.0 / self.cell,
             self.range_min,
             float(tol_m),
-            bool(unseen_is_contradiction),
+            bool(self.unseen_bad if unseen_is_contradiction is None else unseen_is_contradiction),
             self.range_min if self.occluder_min is None else self.occluder_min,
             _NO_CAMERA if self.camera is None else self.camera,
         )
