@@ -43,7 +43,7 @@ def _best_fit(rec: Any, points: np.ndarray, detections: list[Detection], min_sha
     ``min_share``; the earlier detection on a tie), or None."""
     best = None
     for det in detections:
-        share = _part_fitness(rec, det, det.label, int(det.extras.get("view_index", 0)), [points])[0]
+        share = _part_fitness(rec, det, det.label, int(det.extras["view_index"]), [points])[0]
         if share >= min_share and (best is None or share > best[0]):
             best = (share, det)
     return best
