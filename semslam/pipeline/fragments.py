@@ -26,7 +26,7 @@ import numpy as np
 
 from ..detection import Detection
 from ._scan_helpers import _input_indices
-from .parts import _part_fitness
+from .parts import _part_fitness, min_part_share
 from .scan_records import ClusterOutcome, ScanContext
 
 __all__ = ["absorb_fragments"]
@@ -56,8 +56,7 @@ def absorb_fragments(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Cluste
     their ``extras["fragments"]`` / ``extras["fragment_fitness"]``. ``timings["fragments"]`` gets the time (ms)."""
     t0 = time.perf_counter()
     cfg = rec.config
-    pcfg = cfg.parts
-    min_share = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
+    min_share = min_part_share(cfg)
     outcomes = list(outcomes)
     posed = [d for d in detections if d.extras.get("view_index") is not None]  # the stage needs verified poses
     members = {id(d): [o.cluster_index for o in outcomes if o.detection is d] for d in posed}

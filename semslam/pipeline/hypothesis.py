@@ -108,9 +108,9 @@ def scene_visibility(pose_config: Any, scan: PointCloud, seg: SegmentationResult
         image = RangeImage.build_scene(cloud, scan.viewpoint_xyz_m, points, cell_m=pc.image_cell_m,
                                        occluder_points=occluders)
     image = image.with_camera(pc.camera_offset_m)
-    T_os = np.linalg.inv(T_scanner_object.matrix)
+    T_os = np.linalg.inv(T_scanner_object.matrix)  # a scene image: where the scanner saw nothing is unknown
     return float(image.visibility_cost(T_os[None, :3, :3], T_os[None, :3, 3], model.visibility_points,
-                                       model.visibility_normals, pc.visibility_tol_m, unseen_is_contradiction=False)[0])
+                                       model.visibility_normals, pc.visibility_tol_m)[0])
 
 
 def camera_visibility(pose_config: Any, points: np.ndarray, viewpoint_xyz_m: np.ndarray, model: Any,

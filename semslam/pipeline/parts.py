@@ -245,6 +245,13 @@ def _spanning_gap(dist: np.ndarray) -> float:
     return float(minimum_spanning_tree(np.triu(w, 1)).toarray().max(initial=0.0))
 
 
+def min_part_share(cfg: Any) -> float:
+    """The share of a part's points that must lie on the posed model (``PartsConfig.min_part_fitness``, else the
+    pipeline's ``verify_min_fitness``): every part of a union, and a fragment (:mod:`.fragments`)."""
+    pcfg: PartsConfig = cfg.parts
+    return pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
+
+
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
     """Share of each part's points within ``icp_max_correspondence_m`` of the model under ``det``'s pose."""
     from ..pose.model import _nearest
@@ -334,7 +341,7 @@ def _recognized_union(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clust
     None."""
     cfg = rec.config
     pcfg: PartsConfig = cfg.parts
-    min_part = pcfg.min_part_fitness if pcfg.min_part_fitness is not None else cfg.verify_min_fitness
+    min_part = min_part_share(cfg)
     if all(outcomes[k].detection is not None for k in ks):
         return None  # recognised parts only: each has its detection (PartsConfig.detected_parts)
     idx = np.concatenate([seg.cluster_indices[k] for k in ks])
