@@ -314,7 +314,8 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
     hyps, image = search_hypotheses(
         pts, vp, model.distance_field, rotations, model.visibility_points, model.visibility_normals,
         object_radius_m=model.radius_m, symmetry=sym, image_cell_m=cfg.image_cell_m, tau_m=cfg.fit_tau_m,
-        visibility_weight=cfg.visibility_weight, visibility_tol_m=cfg.visibility_tol_m, n_keep=cfg.n_refine,
+        visibility_weight=cfg.visibility_weight, visibility_tol_m=cfg.visibility_tol_m,
+        truncations_m=cfg.translation_steps_m, n_keep=cfg.n_refine,
         n_candidates=cfg.n_candidates, n_coarse_points=cfg.n_coarse_points, hierarchy=hierarchy,
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m

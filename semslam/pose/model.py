@@ -95,6 +95,17 @@ class PoseConfig:
     #: and unchanged.
     local_refine_steps_deg: tuple = (8.0, 4.0, 2.0)
     local_refine_min_radius_m: float = 0.09
+    #: The truncations (m) of the search's translation-only steps, one step each (:func:`.search.search_hypotheses`:
+    #: all but the last two align every start on ``n_coarse_points`` points, the last two the candidates on all;
+    #: the local refinement takes all but the first). A step moves a start by the mean offset of the points to the
+    #: model, so along a plate only the points off it (a tube, a post) pull: a border-cut torque-tool receptacle
+    #: (a 28 cm plate and a tube) seen mostly as plate ended 26 mm off at its true orientation with one step per
+    #: truncation (fit cost 0.37, the true pose's 0.08), 2.7 mm off with two at 3 and 1.5 cm:
+    #: ``(0.03, 0.03, 0.015, 0.015, 0.008, 0.008, 0.006)``, which raised recall on benchmarks/unseen_parts.py seeds
+    #: 0 and 1 from 83.7 / 81.0 % to 86.9 / 84.5 % (precision 99.3 / 100 %) and on the catalogue's seed 0 from 90.8
+    #: to 91.6 %, at ~ +50 % search time; not yet measured on held-out seeds, so not a default
+    #: (benchmarks/history/real-models.md, session 28).
+    translation_steps_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006)
     #: Voxel leaf of the cluster and model for the features and the RANSAC (``coarse_method="ransac"``).
     voxel_m: float = 0.004
     normal_radius_m: float = 0.01
@@ -164,6 +175,13 @@ class PoseConfig:
             raise InputError(f"The 'local_refine_steps_deg' argument of {c} must be a tuple of positive angles "
                              f"(degrees). Got {steps!r} instead.")
         object.__setattr__(self, "local_refine_steps_deg", tuple(float(v) for v in steps))
+        tr = self.translation_steps_m
+        if not isinstance(tr, (tuple, list)) or len(tr) < 3 or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0 for v in tr) \
+                or any(b > a for a, b in zip(tr, tr[1:])):
+            raise InputError(f"The 'translation_steps_m' argument of {c} must be a tuple of at least 3 positive, "
+                             f"non-increasing distances (metres). Got {tr!r} instead.")
+        object.__setattr__(self, "translation_steps_m", tuple(float(v) for v in tr))
         if self.camera_offset_m is not None:
             cam = as_float_array("camera_offset_m", self.camera_offset_m, (3,), caller=c)
             object.__setattr__(self, "camera_offset_m", tuple(float(v) for v in cam))
