@@ -101,10 +101,10 @@ class PoseConfig:
     #: model, so along a plate only the points off it (a tube, a post) pull: a border-cut torque-tool receptacle
     #: (a 28 cm plate and a tube) seen mostly as plate ended 26 mm off at its true orientation with one step per
     #: truncation (fit cost 0.37, the true pose's 0.08), 2.7 mm off with two at 3 and 1.5 cm:
-    #: ``(0.03, 0.03, 0.015, 0.015, 0.008, 0.008, 0.006)``, which raised recall on benchmarks/unseen_parts.py seeds
-    #: 0 and 1 from 83.7 / 81.0 % to 86.9 / 84.5 % (precision 99.3 / 100 %) and on the catalogue's seed 0 from 90.8
-    #: to 91.6 %, at ~ +50 % search time; not yet measured on held-out seeds, so not a default
-    #: (benchmarks/history/real-models.md, session 28).
+    #: ``(0.03, 0.03, 0.015, 0.015, 0.008, 0.008, 0.006)``. In ``seabed`` it raised recall on
+    #: benchmarks/unseen_parts.py (seeds 0-2 pooled) from 81.6 to 84.7 %, but held out it cost precision on border-cut
+    #: clusters for no recall (the catalogue's seed 2: 95.3 -> 94.4 %, below the goal; the shared models' seeds 1
+    #: and 2: 99.1 / 99.0 -> 98.2 / 98.0 %), so it is not a default (benchmarks/history/real-models.md, session 28).
     translation_steps_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006)
     #: Voxel leaf of the cluster and model for the features and the RANSAC (``coarse_method="ransac"``).
     voxel_m: float = 0.004
