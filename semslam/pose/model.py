@@ -20,7 +20,7 @@ from .._validation import as_float_array, check_choice, check_int, check_positiv
 from ..cloud import PointCloud
 from ..errors import InputError, RegistrationError
 from ..registration.icp import ICP_METHODS, IcpTarget, prepare_icp_target
-from .search import DistanceField, RadiusGrid, RotationHierarchy, ViewCentroids, so3_grid
+from .search import TRANSLATION_STEPS_M, DistanceField, RadiusGrid, RotationHierarchy, ViewCentroids, so3_grid
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,7 @@ class PoseConfig:
     #: benchmarks/unseen_parts.py (seeds 0-2 pooled) from 81.6 to 84.7 %, but held out it cost precision on border-cut
     #: clusters for no recall (the catalogue's seed 2: 95.3 -> 94.4 %, below the goal; the shared models' seeds 1
     #: and 2: 99.1 / 99.0 -> 98.2 / 98.0 %), so it is not a default (benchmarks/history/real-models.md, session 28).
-    translation_steps_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006)
+    translation_steps_m: tuple = TRANSLATION_STEPS_M
     #: Voxel leaf of the cluster and model for the features and the RANSAC (``coarse_method="ransac"``).
     voxel_m: float = 0.004
     normal_radius_m: float = 0.01

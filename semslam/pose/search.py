@@ -38,6 +38,9 @@ PARTIAL_DEPTH_MARGIN = 0.1
 DEPTH_TWIN_SHIFTS_M = (-0.024, -0.018, -0.012, -0.006, 0.006, 0.012, 0.018, 0.024)
 #: how far (m, along the view) a translation must end from the best hypothesis's to be its depth twin
 DEPTH_TWIN_MIN_M = 0.005
+#: the default truncations (m) of :func:`search_hypotheses`'s translation-only steps, one step each
+#: (``PoseConfig.translation_steps_m``)
+TRANSLATION_STEPS_M = (0.03, 0.015, 0.008, 0.008, 0.006)
 _PSI = 1.533751168755204288118041  # super-Fibonacci constant (Alexa 2022)
 
 
@@ -125,7 +128,7 @@ def pairwise_rotation_distances(R_as: np.ndarray, R_bs: np.ndarray, symmetry: Sy
 def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: DistanceField, rotations: np.ndarray,
                       model_vis_pts: np.ndarray, model_vis_nrm: np.ndarray, *, object_radius_m: float,
                       symmetry: Symmetry, image_cell_m: float, tau_m: float, visibility_weight: float,
-                      visibility_tol_m: float, truncations_m: tuple = (0.03, 0.015, 0.008, 0.008, 0.006),
+                      visibility_tol_m: float, truncations_m: tuple = TRANSLATION_STEPS_M,
                       n_keep: int = 5, n_candidates: int = 512, n_coarse_points: int = 48,
                       min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
