@@ -132,8 +132,10 @@ class PipelineConfig:
         test it passes, nearest first), up to this many;
         the first whose pose verifies is the detection (its reason says which class failed first and why). A strip
         of a 12 mm plate cut by the swath's border is nearer a thicker flange's face than the plate's: the
-        flange's pose, 15 mm inside the floor, fails, the plate's verifies. 0 (default): the nearest class only.
-        Needs a verification check (``verify_min_fitness``, ``verify_max_visibility`` or
+        flange's pose, 15 mm inside the floor, fails, the plate's verifies. A union of clusters
+        (:class:`~semslam.pipeline.parts.PartsConfig`) is tried the same way, unless one of its clusters was
+        recognised alone (that detection gives way only to the union's nearest class). 0 (default): the nearest
+        class only. Needs a verification check (``verify_min_fitness``, ``verify_max_visibility`` or
         ``verify_max_plane_penetration_m``).
     verify_visibility_image : {"cluster", "scene", "border"}
         What verification's visibility cost compares the model with: the cluster alone (default: every model

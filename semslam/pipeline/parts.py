@@ -9,7 +9,8 @@ one 2-3 cm from its body. Neither part alone matches any view, so both are repor
 unknown clusters nearest to it (gap between their points at most ``max_gap_factor`` times the segmentation's
 cluster tolerance, at most ``max_candidates`` of them, ``max_parts`` clusters per union, and the union no
 longer than the longest class of the database allows). A union goes through the same recognition as a cluster
-(descriptor, match and rejection, size test, pose, hypothesis verification with ``PipelineConfig.verify_*``)
+(descriptor, match and rejection, size test, pose, hypothesis verification with ``PipelineConfig.verify_*``; the
+next classes when its nearest fails, ``verify_next_classes``, unless one of its clusters was recognised alone)
 and is kept only if, in addition, **every part** is on the class's surface under the union's pose (share of its
 points within ``PoseConfig.icp_max_correspondence_m`` of the model at least ``min_part_fitness``): a rock or a
 pipe offcut beside an object does not fit the object's model, so it cannot ride along on a union whose overall
@@ -42,6 +43,7 @@ from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import principal_extent
 from ._scan_helpers import _input_indices
 from .hypothesis import Hypothesis, pose_and_verify
+from .stages import next_classes
 from .scan_records import ClusterOutcome, ScanContext
 
 __all__ = ["PartsConfig", "merge_parts"]
@@ -340,8 +342,6 @@ def _recognized_union(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clust
     recognised, posed and verified with every part on the surface: its entry of :func:`_recognized_unions`, or
     None."""
     cfg = rec.config
-    pcfg: PartsConfig = cfg.parts
-    min_part = min_part_share(cfg)
     if all(outcomes[k].detection is not None for k in ks):
         return None  # recognised parts only: each has its detection (PartsConfig.detected_parts)
     idx = np.concatenate([seg.cluster_indices[k] for k in ks])
@@ -359,21 +359,43 @@ def _recognized_union(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[Clust
         _log.debug("union %s: unknown (nearest %s, distance %.3g > %.3g)", ks, match.nearest_label, match.distance,
                    match.threshold)
         return None
+    raw_idx = np.sort(np.concatenate(raw))
+    border = any(outcomes[k].touches_border for k in ks)
+    # the next classes when the nearest one fails, as a cluster's (PipelineConfig.verify_next_classes); not for a
+    # union holding a recognised part: its verified detection gives way only to the union's nearest class
+    nexts = cfg.verify_next_classes and all(outcomes[k].detection is None for k in ks)
+    tries = [(label, view_index, match)] + [(m.label, m.view_index, m) for m in (
+        next_classes(rec, match, label, extent) if nexts else ())]
+    for label, view_index, found in tries:
+        entry = _union_as(rec, ctx, seg, ks, raw, raw_idx, cloud, extent, border, (label, view_index, found),
+                          _widest_gap(members, gaps) <= limits[label], seed, timings)
+        if entry is not None:
+            if found is not match:
+                entry[3].extras["next_class_of"] = match.label  # the nearest class, whose pose failed
+            return entry
+    return None
+
+
+def _union_as(rec: Any, ctx: ScanContext, seg: Any, ks: list[int], raw: list[np.ndarray], raw_idx: np.ndarray,
+              cloud: Any, extent: np.ndarray, border: bool, as_class: tuple, gap_ok: bool, seed: int,
+              timings: dict) -> tuple | None:
+    """Union ``ks`` posed and verified as ``as_class`` (``(label, view_index, match)``): its entry of
+    :func:`_recognized_unions`, or None."""
+    cfg = rec.config
+    label, view_index, match = as_class
     if cfg.size_tolerance is not None and extent[0] > rec.class_size_limit_m(label):
         _log.debug("union %s: extent %.3f m too big for %s", ks, extent[0], label)
         return None
-    if _widest_gap(members, gaps) > limits[label]:
+    if not gap_ok:
         _log.debug("union %s: its parts too far apart for %s", ks, label)
         return None
-    raw_idx = np.sort(np.concatenate(raw))
-    border = any(outcomes[k].touches_border for k in ks)
     hyp = Hypothesis(raw_idx, cloud, label, view_index, match, border, union=True)
     det = pose_and_verify(rec, ctx, seg, hyp, seed=seed, timings=timings, what=f"union {ks}",
-                          scene_visibility_cost=pcfg.scene_visibility)
+                          scene_visibility_cost=cfg.parts.scene_visibility)
     if det is None:
         return None
     fits = _part_fitness(rec, det, label, view_index, [ctx.scan.points_xyz_m[r] for r in raw])
-    if min(fits) < min_part:
+    if min(fits) < min_part_share(cfg):
         _log.debug("union %s: %s, a part off the surface (part fitness %s)", ks, label, np.round(fits, 3))
         return None
     det.extras["parts"] = [int(k) for k in ks]
@@ -399,10 +421,12 @@ def merge_parts(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutc
     for _, _, ks, det, match, extent, border in kept_unions(accepted):
         replaced = [outcomes[k].detection for k in ks if outcomes[k].detection is not None]
         detections = [d for d in detections if not any(d is r for r in replaced)] + [det]
+        nearest = det.extras.get("next_class_of", match.nearest_label)
         reason = (f"detected as a union of clusters {ks}" + ("" if det.reliable else " (unreliable pose)")
+                  + (f", as the next class (nearest {nearest})" if "next_class_of" in det.extras else "")
                   + (", touches the scan border" if border else ""))
         for k in ks:
-            outcomes[k] = dataclasses.replace(outcomes[k], label=det.label, nearest_label=match.nearest_label,
+            outcomes[k] = dataclasses.replace(outcomes[k], label=det.label, nearest_label=nearest,
                                               distance=match.distance, threshold=match.threshold, detection=det,
                                               reason=reason)
     timings["parts"] = (time.perf_counter() - t0) * 1e3
