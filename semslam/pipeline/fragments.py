@@ -8,7 +8,9 @@ beside the detection of the very object it belongs to.
 :func:`absorb_fragments` (``PartsConfig(fragments=True)``, the default of the part-based stage) runs after it. A
 cluster still unknown becomes a fragment of a detection of the scan when, under that detection's pose, at least
 ``PartsConfig.min_part_fitness`` of its points lie within ``PoseConfig.icp_max_correspondence_m`` of the class's
-model (the test every part of a union passes): the cluster gets the detection's class and its one
+surface model (the test every part of a union passes; ``ScanRecognizer.surface_model``: the pose-model views and
+the recognition views together, so the bottom of a deep bore that only the survey's steep views reach is on it):
+the cluster gets the detection's class and its one
 :class:`~semslam.detection.Detection`, whose ``extras["fragments"]`` lists such clusters (``extras["fragment_fitness"]``
 their shares). The pose is not changed: the detection was posed and verified without them. A rock or an offcut
 beside the object is off the model's surface (its points are not within millimetres of it) and stays unknown.

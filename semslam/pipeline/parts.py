@@ -255,10 +255,11 @@ def min_part_share(cfg: Any) -> float:
 
 
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
-    """Share of each part's points within ``icp_max_correspondence_m`` of the model under ``det``'s pose."""
+    """Share of each part's points within ``icp_max_correspondence_m`` of the class's surface model
+    (``ScanRecognizer.surface_model``: its pose-model and recognition views) under ``det``'s pose."""
     from ..pose.model import _nearest
 
-    model = rec.pose_model(label, view_index)
+    model = rec.surface_model(label, view_index)
     bound = float(model.config.icp_max_correspondence_m)
     T_os = det.T_sensor_object.inverse().matrix
     out = []

@@ -135,6 +135,19 @@ class ScanRecognizer:
                                                                              self.config.pose))
         return model
 
+    def surface_model(self, label: str, view_index: int) -> PoseModel:
+        """The model the part and fragment tests look for a cluster's points on (cached): with the fused pose model,
+        the class's pose-model views and its recognition views together, so a surface only the recognition views
+        reach (the bottom of a deep bore, seen by the survey's steep looks) is on it; else :meth:`pose_model`."""
+        if self.config.pose_model != "fused" or not np.any(self.db.model_labels == label):
+            return self.pose_model(label, view_index)
+        key = ("surface", label)
+        model = self._pose_models.get(key)
+        if model is None:
+            views = self.db.pose_views(label) + [self.db.view_cloud(int(i)) for i in self.db.views_of(label)]
+            model = self._pose_models.setdefault(key, prepare_pose_model(views, self.config.pose))
+        return model
+
     def classify(self, desc: Any) -> tuple[Any, str, int]:
         """The nearest-view match of a cluster's descriptors, and its label and view (the SVM's, when it is used)."""
         match = self.recognizer.match_descriptors(desc)
@@ -186,10 +199,12 @@ class ScanRecognizer:
     def _warm_up(self) -> None:
         from ..errors import SemslamError
 
+        parts, tolerance = self.config.parts, self.config.segmentation.cluster_tolerance_m
         for label in self.db.classes:
             first = int(self.db.views_of(label)[0])
             self.pose_model(label, first)
-        parts, tolerance = self.config.parts, self.config.segmentation.cluster_tolerance_m
+            if parts is not None:  # the part and fragment tests' model
+                self.surface_model(label, first)
         if parts is not None and parts.view_gaps and not isinstance(tolerance, str):  # gaps learnt from the views
             from .parts import _gap_limits
 
