@@ -78,21 +78,30 @@ class _Recognizer:
         return 1.0
 
 
+def plates_on_a_floor(x_ranges_m: list[tuple[float, float]]):
+    """A floor 1 m below the scanner with 12 mm plates on it (x from-to each, 20 cm along y), segmented (the floor
+    removed, each plate's top one cluster), and its ScanContext."""
+    x, y = np.meshgrid(np.arange(-0.5, 0.5, 0.005), np.arange(-0.5, 0.5, 0.005), indexing="ij")
+    floor = np.column_stack([x.ravel(), y.ravel(), np.ones(x.size)])
+    lo, hi = min(a for a, _ in x_ranges_m), max(b for _, b in x_ranges_m)
+    floor = floor[~((floor[:, 0] > lo) & (floor[:, 0] < hi) & (np.abs(floor[:, 1]) < 0.1))]
+    plates = []
+    for a, b in x_ranges_m:
+        px, py = np.meshgrid(np.arange(a, b, 0.004), np.arange(-0.1, 0.1, 0.004), indexing="ij")
+        plates.append(np.column_stack([px.ravel(), py.ravel(), np.full(px.size, 0.988)]))
+    scan = PointCloud(np.vstack([floor] + plates))
+    seg = segment_scene(scan, SegmentationConfig(max_planes=1), seed=0)
+    assert len(seg.clusters) == len(x_ranges_m)
+    ctx = scan_context(scan, default_up_scanner=None, seed=0, stamp_s=0.0, scan_id=0, point_stamps_s=None,
+                       up_scanner=None)
+    return ctx, seg
+
+
 @pytest.fixture(scope="module")
 def plate_scene():
     """A floor with a 12 mm plate on it, segmented (the floor removed, the plate's top one cluster), and its
     ScanContext."""
-    x, y = np.meshgrid(np.arange(-0.5, 0.5, 0.005), np.arange(-0.5, 0.5, 0.005), indexing="ij")
-    floor = np.column_stack([x.ravel(), y.ravel(), np.ones(x.size)])
-    floor = floor[~((np.abs(floor[:, 0]) < 0.1) & (np.abs(floor[:, 1]) < 0.1))]
-    px, py = np.meshgrid(np.arange(-0.1, 0.1, 0.004), np.arange(-0.1, 0.1, 0.004), indexing="ij")
-    plate = np.column_stack([px.ravel(), py.ravel(), np.full(px.size, 0.988)])
-    scan = PointCloud(np.vstack([floor, plate]))
-    seg = segment_scene(scan, SegmentationConfig(max_planes=1), seed=0)
-    assert len(seg.clusters) == 1
-    ctx = scan_context(scan, default_up_scanner=None, seed=0, stamp_s=0.0, scan_id=0, point_stamps_s=None,
-                       up_scanner=None)
-    return ctx, seg
+    return plates_on_a_floor([(-0.1, 0.1)])
 
 
 @pytest.fixture

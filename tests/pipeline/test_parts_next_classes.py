@@ -8,31 +8,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semslam.cloud import PointCloud
 from semslam.detection import Detection
 from semslam.pipeline import PipelineConfig, parts
 from semslam.pipeline.parts import PartsConfig
-from semslam.pipeline.scan_records import ClusterOutcome, scan_context
-from semslam.segmentation.scene import SegmentationConfig, segment_scene
+from semslam.pipeline.scan_records import ClusterOutcome
 
-from .test_next_classes import _Recognizer
+from .test_next_classes import _Recognizer, plates_on_a_floor
 
 
 @pytest.fixture(scope="module")
 def two_plates():
-    """A floor with two 12 mm plates 4 cm apart on it, segmented (the floor removed, each plate's top one cluster),
-    and its ScanContext."""
-    x, y = np.meshgrid(np.arange(-0.5, 0.5, 0.005), np.arange(-0.5, 0.5, 0.005), indexing="ij")
-    floor = np.column_stack([x.ravel(), y.ravel(), np.ones(x.size)])
-    floor = floor[~((np.abs(floor[:, 0]) < 0.14) & (np.abs(floor[:, 1]) < 0.1))]
-    px, py = np.meshgrid(np.arange(0.0, 0.1, 0.004), np.arange(-0.1, 0.1, 0.004), indexing="ij")
-    plate = np.column_stack([px.ravel(), py.ravel(), np.full(px.size, 0.988)])
-    scan = PointCloud(np.vstack([floor, plate + [0.02, 0, 0], plate - [0.12, 0, 0]]))
-    seg = segment_scene(scan, SegmentationConfig(max_planes=1), seed=0)
-    assert len(seg.clusters) == 2
-    ctx = scan_context(scan, default_up_scanner=None, seed=0, stamp_s=0.0, scan_id=0, point_stamps_s=None,
-                       up_scanner=None)
-    return ctx, seg
+    """A floor with two 12 mm plates 4 cm apart on it, segmented (each plate's top one cluster), and its
+    ScanContext."""
+    return plates_on_a_floor([(-0.12, -0.02), (0.02, 0.12)])
 
 
 @pytest.fixture
