@@ -43,8 +43,8 @@ from ..recognition import UNKNOWN_LABEL
 from ..recognition.plausibility import principal_extent
 from ._scan_helpers import _input_indices
 from .hypothesis import Hypothesis, pose_and_verify
-from .stages import next_classes
 from .scan_records import ClusterOutcome, ScanContext
+from .stages import next_classes
 
 __all__ = ["PartsConfig", "merge_parts"]
 
