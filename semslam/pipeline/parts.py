@@ -257,15 +257,12 @@ def min_part_share(cfg: Any) -> float:
 def _part_fitness(rec: Any, det: Any, label: str, view_index: int, parts_points: list[np.ndarray]) -> list[float]:
     """Share of each part's points within ``icp_max_correspondence_m`` of the class's surface model
     (``ScanRecognizer.surface_model``: its pose-model and recognition views) under ``det``'s pose."""
-    from ..pose.model import _nearest
-
-    model = rec.surface_model(label, view_index)
-    bound = float(model.config.icp_max_correspondence_m)
+    surface = rec.surface_model(label, view_index)
+    bound = float(rec.config.pose.icp_max_correspondence_m)
     T_os = det.T_sensor_object.inverse().matrix
     out = []
     for p in parts_points:
-        q = p @ T_os[:3, :3].T + T_os[:3, 3]
-        d = _nearest(model, np.ascontiguousarray(q, dtype=np.float64), bound)[0]
+        d = surface.distances(p @ T_os[:3, :3].T + T_os[:3, 3], bound)
         out.append(float(np.mean(np.isfinite(d))) if len(d) else 0.0)
     return out
 

@@ -36,6 +36,7 @@ from ..detection import Detection
 from ..errors import InputError, RecognitionError
 from ..recognition import Recognizer, SvmClassifier, ViewDatabase, chi2_distances, combine_descriptors
 from ..pose.estimate import PoseModel, estimate_object_pose, prepare_pose_model
+from ..pose.model import SurfacePoints
 from ..segmentation.scene import SegmentationResult
 from .attached import find_attached
 from .class_measures import class_size_limit_m, median_view_area_m2
@@ -114,7 +115,7 @@ class ScanRecognizer:
             self.svm = SvmClassifier(seed=seed).fit(db.features(cfg.descriptor), db.labels)
         self._features = db.features(cfg.descriptor)
         # caches filled on first use; a value computed twice by two threads is the same, the first one stays
-        self._pose_models: dict[Any, PoseModel] = {}
+        self._pose_models: dict[Any, PoseModel | SurfacePoints] = {}
         self._size_limits: dict[str, float] = {}
         self._view_areas: dict[tuple[str, float], float] = {}
 
@@ -135,17 +136,17 @@ class ScanRecognizer:
                                                                              self.config.pose))
         return model
 
-    def surface_model(self, label: str, view_index: int) -> PoseModel:
-        """The model the part and fragment tests look for a cluster's points on (cached): with the fused pose model,
+    def surface_model(self, label: str, view_index: int) -> SurfacePoints:
+        """The surface the part and fragment tests look for a cluster's points on (cached): with the fused pose model,
         the class's pose-model views and its recognition views together, so a surface only the recognition views
-        reach (the bottom of a deep bore, seen by the survey's steep looks) is on it; else :meth:`pose_model`."""
+        reach (the bottom of a deep bore, seen by the survey's steep looks) is on it; else :meth:`pose_model`'s."""
         if self.config.pose_model != "fused" or not np.any(self.db.model_labels == label):
-            return self.pose_model(label, view_index)
+            return SurfacePoints.of_pose_model(self.pose_model(label, view_index))
         key = ("surface", label)
         model = self._pose_models.get(key)
         if model is None:
             views = self.db.pose_views(label) + [self.db.view_cloud(int(i)) for i in self.db.views_of(label)]
-            model = self._pose_models.setdefault(key, prepare_pose_model(views, self.config.pose))
+            model = self._pose_models.setdefault(key, SurfacePoints.of_views(views, self.config.pose))
         return model
 
     def classify(self, desc: Any) -> tuple[Any, str, int]:

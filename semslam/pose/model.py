@@ -326,6 +326,43 @@ def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseMode
     )
 
 
+@dataclass(frozen=True)
+class SurfacePoints:
+    """An object's surface as points in its frame, for how many of a cluster's points lie on it (the pipeline's
+    part and fragment tests): the points the pose model's ICP aligns to, without its search structures.
+    :meth:`distances` gives what :func:`_nearest` gives on a pose model of the same views."""
+
+    points_xyz_m: np.ndarray
+    grid: RadiusGrid | None
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """For bounds beyond the grid's cell (built on first use)."""
+        return cKDTree(self.points_xyz_m)
+
+    @classmethod
+    def of_views(cls, model: Any, config: PoseConfig) -> "SurfacePoints":
+        """The points of ``model`` (as :func:`prepare_pose_model` takes it) voxelised as its ICP target is."""
+        from ..segmentation.voxel import voxel_downsample
+
+        pts = np.vstack([v[0] for v in _as_views(model)])
+        pts = voxel_downsample(pts, config.model_icp_voxel_m) if config.model_icp_voxel_m > 0 else pts
+        pts = np.ascontiguousarray(pts, dtype=np.float64)
+        return cls(pts, RadiusGrid.build(pts, max(config.fit_tau_m, config.icp_max_correspondence_m)))
+
+    @classmethod
+    def of_pose_model(cls, model: PoseModel) -> "SurfacePoints":
+        """The pose model's own ICP target and radius grid."""
+        return cls(model.icp_target.points_xyz_m, model.radius_grid)
+
+    def distances(self, points: np.ndarray, bound_m: float) -> np.ndarray:
+        """Distance (N,) from each of ``points`` (N, 3) to the nearest surface point, inf beyond ``bound_m``."""
+        q = np.ascontiguousarray(points, dtype=np.float64)
+        if self.grid is not None and bound_m <= self.grid.cell_m:
+            return self.grid.query(q, bound_m)[0]
+        return self.tree.query(q, k=1, distance_upper_bound=bound_m)[0]
+
+
 def _nearest(model: PoseModel, points: np.ndarray, bound_m: float) -> tuple[np.ndarray, np.ndarray]:
     """``icp_target.tree.query(points, k=1, distance_upper_bound=bound_m)``, by the radius grid when it applies."""
     g = model.radius_grid

@@ -12,6 +12,8 @@ import pytest
 from semslam.detection import Detection
 from semslam.pipeline import PipelineConfig, ScanRecognizer
 from semslam.pipeline.parts import PartsConfig, _part_fitness
+from semslam.pose.estimate import prepare_pose_model
+from semslam.pose.model import SurfacePoints, _nearest
 from semslam.recognition.database import ViewDatabase
 from semslam.symmetry import Symmetry
 
@@ -75,7 +77,7 @@ def test_a_piece_only_the_recognition_views_show_lies_on_the_surface_model(recog
         config = recognizer.config
 
         def surface_model(self, label, view_index):
-            return recognizer.pose_model(label, view_index)
+            return SurfacePoints.of_pose_model(recognizer.pose_model(label, view_index))
 
     assert _part_fitness(PoseModelOnly(), _at_identity("a"), "a", 0, [bottom, plate]) == [0.0, 1.0]
 
@@ -85,8 +87,20 @@ def test_points_off_the_object_are_not_on_the_surface_model(recognizer):
     assert _part_fitness(recognizer, _at_identity("a"), "a", 0, [beside]) == [0.0]
 
 
-def test_without_pose_model_views_or_with_the_matched_view_the_surface_is_the_pose_model():
-    rec = ScanRecognizer(_database(with_model_views=False), PipelineConfig())
-    assert rec.surface_model("a", 0) is rec.pose_model("a", 0)
-    rec = ScanRecognizer(_database(), PipelineConfig(pose_model="view"))
-    assert rec.surface_model("a", 1) is rec.pose_model("a", 1)
+def test_without_pose_model_views_or_with_the_matched_view_the_surface_is_the_pose_models():
+    for db, cfg, view in ((_database(with_model_views=False), PipelineConfig(), 0),
+                          (_database(), PipelineConfig(pose_model="view"), 1)):
+        rec = ScanRecognizer(db, cfg)
+        surface, model = rec.surface_model("a", view), rec.pose_model("a", view)
+        assert surface.points_xyz_m is model.icp_target.points_xyz_m and surface.grid is model.radius_grid
+
+
+def test_the_surface_points_give_the_pose_models_nearest_distances(recognizer):
+    """The surface of the same views is the pose model's ICP target: the same distances as the pose model's own
+    nearest-point query (``pose.model._nearest``), within the radius grid's bound and beyond it (the KD-tree)."""
+    views = recognizer.db.pose_views("a") + [recognizer.db.view_cloud(int(i)) for i in recognizer.db.views_of("a")]
+    model = prepare_pose_model(views, recognizer.config.pose)
+    surface = SurfacePoints.of_views(views, recognizer.config.pose)
+    q = np.random.default_rng(1).uniform(-0.12, 0.22, size=(500, 3))
+    for bound in (0.006, 0.05):
+        np.testing.assert_array_equal(surface.distances(q, bound), _nearest(model, q, bound)[0])
