@@ -140,13 +140,16 @@ class ScanRecognizer:
         """The surface the part and fragment tests look for a cluster's points on (cached): with the fused pose model,
         the class's pose-model views and its recognition views together, so a surface only the recognition views
         reach (the bottom of a deep bore, seen by the survey's steep looks) is on it; else :meth:`pose_model`'s."""
-        if self.config.pose_model != "fused" or not np.any(self.db.model_labels == label):
-            return SurfacePoints.of_pose_model(self.pose_model(label, view_index))
-        key = ("surface", label)
+        fused = self.config.pose_model == "fused"
+        key = ("surface", label, None if fused else int(view_index))
         model = self._pose_models.get(key)
         if model is None:
-            views = self.db.pose_views(label) + [self.db.view_cloud(int(i)) for i in self.db.views_of(label)]
-            model = self._pose_models.setdefault(key, SurfacePoints.of_views(views, self.config.pose))
+            if fused and np.any(self.db.model_labels == label):
+                views = self.db.pose_views(label) + [self.db.view_cloud(int(i)) for i in self.db.views_of(label)]
+                model = SurfacePoints.of_views(views, self.config.pose)
+            else:
+                model = SurfacePoints.of_pose_model(self.pose_model(label, view_index))
+            model = self._pose_models.setdefault(key, model)
         return model
 
     def classify(self, desc: Any) -> tuple[Any, str, int]:

@@ -93,6 +93,7 @@ def test_without_pose_model_views_or_with_the_matched_view_the_surface_is_the_po
         rec = ScanRecognizer(db, cfg)
         surface, model = rec.surface_model("a", view), rec.pose_model("a", view)
         assert surface.points_xyz_m is model.icp_target.points_xyz_m and surface.grid is model.radius_grid
+        assert rec.surface_model("a", view) is surface  # cached: its KD-tree, when built, is built once
 
 
 def test_the_surface_points_give_the_pose_models_nearest_distances(recognizer):
