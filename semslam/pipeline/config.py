@@ -163,6 +163,13 @@ class PipelineConfig:
         Objects attached to structure (:mod:`semslam.pipeline.attached`): in the clusters rejected as too big or
         cut by the border, the structure (a pipe, a post) is removed primitive by primitive and the rest is
         recognised. Off (None) by default.
+    track_border_cut_m : float or None
+        Border-cut clusters rejected alone, or recognised alone as another class, are tried as the objects
+        recognised in the scan before, carried into this scan by the vehicle's motion between the two
+        (:mod:`semslam.pipeline.tracking`; a stream's runner, a dataset's or the live node's, gives the scan before;
+        :meth:`ScanRecognizer.recognize` alone tracks nothing): ICP from the predicted pose, the same verification,
+        and at most this far (m) from the prediction. The detection keeps the border's flag (unreliable). Off (None)
+        by default; needs ``verify_min_fitness``.
     deskew : bool
         Carry every point of a scan with per-point stamps into the scanner frame at the scan's end with the
         vehicle's own motion over the scan (attitude + DVL, :mod:`semslam.pipeline.deskew`) before segmenting it;
@@ -202,6 +209,7 @@ class PipelineConfig:
     verify_camera_shadows: bool = False
     parts: PartsConfig | None = None
     attached: AttachedConfig | None = None
+    track_border_cut_m: float | None = None
     deskew: bool = True
     deskew_lookahead_s: float = 0.5
 
@@ -236,6 +244,11 @@ class PipelineConfig:
                              f"arguments of {c} need "
                              f"estimate_pose=True (they test the estimated pose). Got estimate_pose=False instead.")
         check_int("verify_next_classes", self.verify_next_classes, caller=c, minimum=0)
+        if self.track_border_cut_m is not None:
+            check_positive("track_border_cut_m", self.track_border_cut_m, caller=c)
+            if self.verify_min_fitness is None:
+                raise InputError(f"The 'track_border_cut_m' argument of {c} needs verify_min_fitness (a tracked "
+                                 f"cluster's pose is verified like any other). Got verify_min_fitness=None.")
         if self.verify_next_classes and all(v is None for v in (self.verify_min_fitness, self.verify_max_visibility,
                                                                  self.verify_max_plane_penetration_m)):
             raise InputError(f"The 'verify_next_classes' argument of {c} needs a verification check "

@@ -240,6 +240,12 @@ class NavigationHistory:
         while self.dvl and self.dvl[0][0] < stamp_s - self.memory_s:
             self.dvl.popleft()
 
+    def copy(self) -> "NavigationHistory":
+        """The samples held now, apart from those that come later (another thread's, :mod:`semslam.run.ros1`)."""
+        out = NavigationHistory(self.memory_s)
+        out.attitude, out.dvl = deque(self.attitude), deque(self.dvl)
+        return out
+
     def attitude_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         if not self.attitude:
             return np.zeros(0), np.zeros((0, 3))

@@ -45,6 +45,8 @@ class Hypothesis:
         The points are a union of clusters (:mod:`semslam.pipeline.parts`): a part of the object may be missing or
         elsewhere, so, like a border-cut cluster, the pose search also starts the translation on a grid across the
         object (``estimate_object_pose(partial=True)``, ``PoseConfig.partial_start_step_m``).
+    init_T_sensor_object : ndarray (4, 4) or None
+        A predicted pose (:mod:`semslam.pipeline.tracking`): the pose is refined by ICP from it, with no search.
     """
 
     raw_idx: np.ndarray
@@ -54,6 +56,7 @@ class Hypothesis:
     match: Any
     touches_border: bool = False
     union: bool = False
+    init_T_sensor_object: np.ndarray | None = None
 
 
 def verification_failure(det: Detection, min_fitness: float | None, max_visibility: float | None,

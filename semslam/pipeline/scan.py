@@ -231,7 +231,7 @@ class ScanRecognizer:
     # -- one scan ---------------------------------------------------------------------------------
     def recognize(self, scan: PointCloud, *, seed: int | np.random.Generator = 0, stamp_s: float = float("nan"),
                   scan_id: int = -1, point_stamps_s: Any = None, up_scanner: Any = None,
-                  measured: PointCloud | None = None) -> RecognitionResult:
+                  measured: PointCloud | None = None, priors: Any = None) -> RecognitionResult:
         """Segment ``scan``, recognise each cluster and estimate the pose of the recognised ones.
 
         Parameters
@@ -253,6 +253,12 @@ class ScanRecognizer:
         measured : PointCloud, optional
             The scan as measured when ``scan`` is its deskewed copy (:mod:`semslam.pipeline.deskew`): the border
             test reads the directions the scanner measured.
+        priors : sequence of TrackPrior, or a callable returning one, optional
+            The objects of the scan before, predicted in this scan's frame
+            (:func:`~semslam.pipeline.tracking.predicted_priors`): with ``PipelineConfig.track_border_cut_m`` the
+            border-cut clusters rejected alone are tried as them (:mod:`semslam.pipeline.tracking`). A callable is
+            called once this scan's own stages are done (a runner recognising scans at once waits there for the
+            scan before).
         """
         cfg = self.config
         ctx = scan_context(scan, default_up_scanner=cfg.up_scanner, seed=seed, stamp_s=stamp_s, scan_id=scan_id,
@@ -270,6 +276,13 @@ class ScanRecognizer:
                                                seed=ctx.cluster_seed + len(seg.clusters), timings=timings)
             if cfg.parts.fragments:  # pieces of an object recognised in this scan
                 outcomes = absorb_fragments(self, ctx, seg, outcomes, detections, timings=timings)
+        if cfg.track_border_cut_m is not None and priors is not None:
+            from .tracking import track_rejected
+
+            t_wait = time.perf_counter()
+            given = priors() if callable(priors) else priors
+            t_start += time.perf_counter() - t_wait  # the wait for the scan before is not this scan's time
+            outcomes, detections = track_rejected(self, ctx, seg, outcomes, detections, given, timings)
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return RecognitionResult(detections, outcomes, seg, timings)
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from .._validation import check_choice
 from ..cloud import PointCloud
-from ..errors import RecognitionError
+from ..errors import InputError, RecognitionError
 from .database import DESCRIPTORS, ViewDatabase, ViewDescriptors, combine_descriptors
 from .matching import Chi2NearestNeighbor, chi2_distances
 from .rejection import UNKNOWN_LABEL
@@ -94,6 +94,20 @@ class Recognizer:
         thr = self.classifier.rejection_
         threshold = float("inf") if thr is None else thr.threshold_of(nearest)
         return Match(str(labels[0]), i, nearest, float(dist[0]), threshold, descriptors)
+
+    def class_match(self, descriptors: ViewDescriptors, label: str) -> Match:
+        """The nearest view of class ``label`` to ``descriptors``, whether or not the rejection accepts it (a cluster
+        tracked from an earlier scan: :mod:`semslam.pipeline.tracking`)."""
+        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
+        dist = chi2_distances(x, self.classifier.X_fit_)[0]
+        rows = np.flatnonzero(np.asarray(self.db.labels).astype(str) == label)
+        if not len(rows):
+            raise InputError(f"The 'label' argument of Recognizer.class_match must be a class of the database "
+                             f"{sorted(set(map(str, self.db.labels)))}. Got {label!r} instead.")
+        i = int(rows[np.argmin(dist[rows])])
+        thr = self.classifier.rejection_
+        return Match(label, i, label, float(dist[i]), float("inf") if thr is None else thr.threshold_of(label),
+                     descriptors)
 
     def match(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> Match:
         """Describe ``cloud`` (any frame, viewpoint = sensor origin) as the database's views and match it."""

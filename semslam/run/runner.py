@@ -23,7 +23,9 @@ from threadpoolctl import threadpool_limits
 from .._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ..detection import Detection
 from ..errors import InputError
+from ..pipeline.dataset_detection import detect_scan, first_stamp_s, priors_from_scan_before
 from ..pipeline.deskew import NavigationHistory, deskew_lookahead_s, deskews
+from ..pipeline.tracking import tracks
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
 from .sessions import BACKENDS, make_session, with_start
@@ -108,6 +110,7 @@ class Runner:
         self._waiting: list = []    # scans to deskew, waiting for the navigation after their end:
         #                             (message, up, its first point's stamp)
         self._pool = None
+        self._before = None  # the scan before's detections (or a callable giving them) and first stamp: tracking
         self.sessions: dict = {}
         self.start: InitialState | None = None
         self.detections_by_scan: dict[int, list[Detection]] = {}
@@ -198,11 +201,11 @@ class Runner:
             self._submit(msg, up, self._scan_motion(msg), first_s)
 
     def _submit(self, msg: Scan, up, motion, first_s: float | None = None) -> None:
-        from ..pipeline.dataset_detection import detect_scan
-
+        first_s = _first_stamp(msg) if first_s is None else first_s
         kw = dict(scan_id=msg.scan_id, start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
                   point_stamps_s=msg.point_stamps_s, seed=self.seed, keep_unreliable=self.keep_unreliable,
-                  up_scanner=up, motion=motion, T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner)
+                  up_scanner=up, motion=motion, T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner,
+                  priors=self._priors(msg))
         if self.lookahead:
             if self._pool is None:
                 from concurrent.futures import ThreadPoolExecutor
@@ -212,11 +215,25 @@ class Runner:
                 self._limit_blas()
                 self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
             # its detections are stamped by its points: none before the first of them
-            self._in_flight.append((_first_stamp(msg) if first_s is None else first_s, msg,
-                                    self._pool.submit(_detect_and_trim, self.recognizer, msg.cloud, **kw)))
+            fut = self._pool.submit(_detect_and_trim, self.recognizer, msg.cloud, **kw)
+            self._in_flight.append((first_s, msg, fut))
+            # (the next scan's worker waits for this one's detections: submitted first, it never waits on the next)
+            self._before = (lambda: fut.result()[2].detections, first_s)
             self._collect(block_over=self.lookahead)
             return
-        self._recognised(msg, *detect_scan(self.recognizer, msg.cloud, **kw))
+        out = detect_scan(self.recognizer, msg.cloud, **kw)
+        self._before = (out[2].detections, first_s)
+        self._recognised(msg, *out)
+
+    def _priors(self, msg: Scan):
+        """The scan before's objects for ``msg``'s tracking (``PipelineConfig.track_border_cut_m``; None: off, or no
+        scan before), carried by the motion between from the navigation held."""
+        if self._before is None or not tracks(self.recognizer):
+            return None
+        dets, first_s = self._before
+        motion = self._nav.motion(self.vehicle.dvl.T_vehicle_dvl.rotation, first_s, msg.end_stamp_s,
+                                  lookahead_s=self._lookahead_s)
+        return priors_from_scan_before(dets, motion, self.vehicle.scanner.T_vehicle_scanner, msg.end_stamp_s)
 
     def _scan_motion(self, msg: Scan):
         """The vehicle's motion over a scan from the navigation held (None: no navigation over the scan, counted
@@ -421,8 +438,6 @@ def run_stream(dive, **runner_kw) -> RunOutcome:
 def _detect_and_trim(recognizer, cloud, **kw):
     """:func:`detect_scan` in a worker thread, then the heap's free pages back to the system (off the thread that
     reads the dive and runs the filters)."""
-    from ..pipeline.dataset_detection import detect_scan
-
     out = detect_scan(recognizer, cloud, **kw)
     release_free_memory(TRIM_ABOVE_BYTES)
     return out
@@ -430,8 +445,4 @@ def _detect_and_trim(recognizer, cloud, **kw):
 
 def _first_stamp(msg: Scan) -> float:
     """The stamp of a scan's first point (its start without per-point stamps): no detection of it is older."""
-    st = msg.point_stamps_s
-    if st is None or not len(st):
-        return msg.start_stamp_s
-    finite = st[np.isfinite(st)]
-    return min(msg.start_stamp_s, float(finite.min())) if len(finite) else msg.start_stamp_s
+    return first_stamp_s(msg.point_stamps_s, msg.start_stamp_s)

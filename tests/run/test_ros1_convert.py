@@ -457,3 +457,55 @@ def test_a_scan_is_recognised_as_it_arrives_not_after_the_reorder_window(ros1_ba
     assert live.dropped_late == {} and live.stats["scans_late"] == 0
     np.testing.assert_allclose(out.results["pose"].position_ned_m, ref.results["pose"].position_ned_m,
                                rtol=0, atol=1e-9)
+
+
+class _PriorRecorder:
+    """A recogniser that tracks (``track_border_cut_m``) and deskews: one detection per scan 3 m ahead of the
+    scanner; it records the priors each scan is given (the scan before's detection, carried by the navigation)."""
+
+    def __init__(self) -> None:
+        from semslam.pipeline import PipelineConfig
+
+        self.config = PipelineConfig(verify_min_fitness=0.9, track_border_cut_m=0.03)
+        self.seen = {}
+
+    def recognize(self, cloud, *, seed, stamp_s, scan_id, point_stamps_s=None, up_scanner=None, measured=None,
+                  priors=None):
+        from semslam.detection import Detection
+        from semslam.geometry import RigidTransform
+        from semslam.pipeline.scan import RecognitionResult
+
+        self.seen[scan_id] = [] if priors is None else [(p.scan_id, p.T_sensor_object) for p in priors()]
+        det = Detection("ball_valve", 1.0, RigidTransform.from_xyz_rpy([0.0, 0.0, 3.0], [0.0, 0.0, 0.0]),
+                        np.diag([1e-3] * 3 + [1e-2] * 3), stamp_s=float(stamp_s), scan_id=scan_id, n_points=100)
+        return RecognitionResult([det], [], None, {"total": 0.0})
+
+
+def test_the_node_tracks_from_the_scan_before_as_semslam_run_does(ros1_bag):
+    """Every scan of the bag through the node (scan_queue "all") and through `semslam run`'s runner: each scan but
+    the first is given the scan before's object, carried by the same navigation to the same place (to 1e-9 m)."""
+    from semslam.run import open_dive, run_stream
+    from semslam.run.ros1.decode import LiveDecoder
+    from semslam.run.ros1.live import LiveSlam
+    from tests._support.ros1 import raw_bag_messages
+
+    bag, tmap, vehicle = ros1_bag
+    ref = _PriorRecorder()
+    run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("dr",), recognizer=ref)
+    dec = LiveDecoder(tmap, vehicle)
+    msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
+            in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans])]
+    origin = msgs[0].stamp_ns - msgs[0].stamp_ns % 1_000_000_000
+    rec = _PriorRecorder()
+    live = LiveSlam(vehicle, rec, mode="pose", scan_queue="all", max_hold_s=1e6)
+    for m in msgs:
+        live.add((m.stamp_ns - origin) / 1e9, m.kind, m.payload)
+    live.close()
+    first, *rest = sorted(ref.seen)
+    assert sorted(rec.seen) == sorted(ref.seen) and len(rest) >= 5
+    assert ref.seen[first] == rec.seen[first] == []
+    for sid in rest:
+        (got,), (want,) = rec.seen[sid], ref.seen[sid]
+        assert got[0] == want[0] == sid - 1
+        np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9)
+        assert np.linalg.norm(want[1][:3, 3] - [0.0, 0.0, 3.0]) > 1e-3  # the vehicle moved between the two scans

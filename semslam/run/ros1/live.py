@@ -12,14 +12,14 @@ Only three things are the node's own:
 0. **The source's reorder window** (``reorder_window_s``, :class:`~semslam.run.ros1.timing.ReorderBuffer`): the
    runner takes messages in stamp order (a source's promise; a bag source reorders within 2 s), topics arrive with
    their transport delays. Older than what was released: dropped, counted (``dropped_late``, with the runner's).
-1. **Recognition off the dispatcher thread.** A scan goes to a worker as it arrives, ahead of the reorder window
-   (recognition needs no other message), through a keep-newest slot of size one (a
-   scan waiting when a newer one comes is dropped, counted) and its detections enter through
-   :meth:`Runner.add_scan_detections`. The runner's delay line is in message time; recognition takes wall time. So
-   a navigation message whose feeding would release the filter past the start of a scan still in recognition
-   (``stamp - hold_s > scan start``) waits here, at most ``max_hold_s`` of message time: then that scan is given up
-   (``scans_late``; its detections, when they come, are counted late by the runner) and navigation goes on. With
-   nothing given up or dropped, the runner receives what ``semslam run`` gives it: the same estimate.
+1. **Recognition off the dispatcher thread.** A scan goes to a worker as it arrives, ahead of the reorder window,
+   through a keep-newest slot of size one (a scan waiting when a newer one comes is dropped, counted); its
+   detections enter through :meth:`Runner.add_scan_detections`. The runner's delay line is in message time,
+   recognition takes wall time: a navigation message whose feeding would release the filter past the start of a
+   scan still in recognition (``stamp - hold_s > scan start``) waits here, at most ``max_hold_s`` of message time,
+   then that scan is given up (``scans_late``; its detections are counted late by the runner). With nothing given
+   up or dropped, the runner receives what ``semslam run`` gives it: the same estimate. (Tracking,
+   ``track_border_cut_m``, follows objects from the scan the worker recognised before.)
 2. **The low-latency prediction** (:meth:`LiveSlam.predict_to`): the published mode's filter state carried to each
    attitude sample as it arrives, through the attitude samples received since the filter's time.
 
@@ -43,7 +43,7 @@ from ..._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ...errors import SemslamError, SlamError
 from ...pipeline.deskew import deskew_lookahead_s, deskews
 from ..messages import Attitude, Depth, Dvl, Scan
-from .live_deskew import DeskewQueue
+from .live_deskew import DeskewQueue, tracking_priors
 from .live_health import LogTally, live_health
 from .live_prediction import Prediction, carry_forward, session_attitude
 from .timing import FifoSlot, LatestSlot, ReorderBuffer
@@ -62,6 +62,7 @@ class ScanJob:
     up_scanner: Any = None
     abandoned: bool = False
     motion: Any = None
+    navigation: Any = None  # the navigation held when it was ready (tracking from the scan before)
     meta: dict = field(default_factory=dict)
 
     @property
@@ -103,28 +104,13 @@ class LiveSlam:
         however late (replays that must give the offline result; use a large ``max_hold_s``).
     """
 
-    def __init__(
-        self,
-        vehicle,
-        recognizer=None,
-        *,
-        mode: str = "pose",
-        modes=None,
-        config=None,
-        symmetries=None,
-        backend: str = "ekf",
-        survey=None,
-        seed: int = 0,
-        keep_unreliable: bool = False,
-        up_from_attitude: bool = False,
-        geodetic_origin=None,
-        reorder_window_s: float = 0.5,
-        max_hold_s: float = 5.0,
-        scan_queue: str = "newest",
-        on_estimate: Callable[["LiveSlam"], None] | None = None,
-        on_prediction: Callable[["LiveSlam", "Prediction"], None] | None = None,
-        on_detections: Callable[[ScanJob, Any, float], None] | None = None,
-    ) -> None:
+    def __init__(self, vehicle, recognizer=None, *, mode: str = "pose", modes=None, config=None, symmetries=None,
+                 backend: str = "ekf", survey=None, seed: int = 0, keep_unreliable: bool = False,
+                 up_from_attitude: bool = False, geodetic_origin=None, reorder_window_s: float = 0.5,
+                 max_hold_s: float = 5.0, scan_queue: str = "newest",
+                 on_estimate: Callable[["LiveSlam"], None] | None = None,
+                 on_prediction: Callable[["LiveSlam", "Prediction"], None] | None = None,
+                 on_detections: Callable[[ScanJob, Any, float], None] | None = None) -> None:
         from ..runner import Runner
 
         modes = (mode,) if modes is None else tuple(modes)
@@ -156,7 +142,7 @@ class LiveSlam:
         self._deskew = DeskewQueue(vehicle.dvl.T_vehicle_dvl.rotation,  # scans waiting for the navigation
                                    deskew_lookahead_s(recognizer))
         self._pending: list[ScanJob] = []  # scans waiting for or in recognition, in stamp order
-        self._n_scans = 0
+        self._n_scans, self._before = 0, None  # the worker's scan before: (its detections, first stamp)
         #: when the message last given to the runner was received (``time.monotonic()``): latency statistics
         self.fed_wall_s = math.nan
         self._filter_t = -math.inf
@@ -341,7 +327,7 @@ class LiveSlam:
 
     # ------------------------------------------------------------------ recognition (worker thread)
     def _work(self) -> None:
-        from ...pipeline.dataset_detection import detect_scan
+        from ...pipeline.dataset_detection import detect_scan, first_stamp_s
 
         while True:
             job = self.slot.get()
@@ -354,7 +340,10 @@ class LiveSlam:
                                                   point_stamps_s=sc.point_stamps_s, seed=self.seed,
                                                   keep_unreliable=self.keep_unreliable, up_scanner=job.up_scanner,
                                                   motion=job.motion,
-                                                  T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner)
+                                                  T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner,
+                                                  priors=tracking_priors(self.recognizer, job, self._before,
+                                                                         self.vehicle, self._deskew.lookahead_s))
+                self._before = (result.detections, first_stamp_s(sc.point_stamps_s, sc.start_stamp_s))
             except SemslamError as err:  # a scan the pipeline refuses: counted, navigation goes on
                 kept, stats, result, err_text = [], None, None, f"scan {sc.scan_id}: {err}"
             except Exception as err:  # noqa: BLE001 - a bug must not stop the navigation: counted and reported

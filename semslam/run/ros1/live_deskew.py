@@ -63,5 +63,20 @@ class DeskewQueue:
             self.waiting.remove(job)
             job.motion = self.nav.scan_motion(self.R_vehicle_dvl, job.scan.point_stamps_s, job.end_s,
                                               lookahead_s=self.lookahead_s)
+            job.navigation = self.nav.copy()  # the worker's motion since the scan before (tracking) reads it
             self.not_deskewed += job.motion is None
         return [j for j in out if not j.abandoned]
+
+
+def tracking_priors(recognizer: Any, job: Any, before: Any, vehicle: Any, lookahead_s: float) -> Any:
+    """The scan before's objects for ``job``'s tracking (``PipelineConfig.track_border_cut_m``; None: off, no scan
+    before, or a scan recognised without waiting for its navigation): ``before`` is ``(its detections, its first
+    point's stamp)``, the motion between from the navigation held when the job was ready."""
+    from ...pipeline.dataset_detection import priors_from_scan_before
+    from ...pipeline.tracking import tracks
+
+    nav = getattr(job, "navigation", None)
+    if before is None or nav is None or not tracks(recognizer):
+        return None
+    motion = nav.motion(vehicle.dvl.T_vehicle_dvl.rotation, before[1], job.end_s, lookahead_s=lookahead_s)
+    return priors_from_scan_before(before[0], motion, vehicle.scanner.T_vehicle_scanner, job.end_s)

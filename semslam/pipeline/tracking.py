@@ -1,0 +1,173 @@
+"""Border-cut clusters recognised by tracking (``PipelineConfig.track_border_cut_m``).
+
+A cluster cut by the scan's border is often too little of its object to tell it from its neighbours in the catalogue
+(a strip of a flange's rim, a tee without the arm that makes it a tee): alone it is rejected, or taken for the
+neighbour it looks like (a cross cut to a tee fits the tee at fitness 1.000). But a line scanner
+sweeps the scene a fraction of its swath per scan, so an object leaving the swath was usually recognised whole in the
+scan before. Its pose there, carried into this scan by the vehicle's own motion between the two (attitude + DVL,
+:mod:`semslam.pipeline.deskew`; never the filter's estimate, never ground truth), is a prior: the rejected cluster
+that lies where the object is predicted is aligned to the class's model by ICP from the predicted pose, and kept
+when the pose passes the same verification as any other (fitness, floor, visibility) and moved no more than
+``track_border_cut_m`` from the prediction. Its detection keeps the border's flag (unreliable: by default it does not
+enter the filter) and says whence it came (``extras["tracked_from_scan"]``; the reason "tracked from scan k").
+A border-cut cluster recognised alone as another class than the object predicted there is tried the same way: when
+the predicted object's pose verifies too, the scan before's view (the whole object) decides what it is.
+
+The prior comes from the detections of the scan before (tracked ones included, so an object is followed out of the
+swath); an object entering the swath has none, so its first cut views stay rejected. Nothing here reads more than
+one earlier scan and the navigation between the two."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..detection import Detection
+from ..errors import RegistrationError
+from ._scan_helpers import _input_indices
+from .hypothesis import Hypothesis, pose_hypothesis, verification_failure
+from .scan_records import ClusterOutcome, ScanContext
+from .stages import describe, size_rejection
+
+__all__ = ["MAX_TRACK_AGE_S", "TrackPrior", "predicted_priors", "track_rejected", "tracks"]
+
+_log = logging.getLogger("semslam.pipeline")
+
+#: the oldest detection (s before the scan's stamp) that is carried into a scan as a prior
+MAX_TRACK_AGE_S = 3.0
+
+
+def tracks(recognizer: Any) -> bool:
+    """Does ``recognizer`` (a :class:`~semslam.pipeline.ScanRecognizer`, or any object with a ``config``) track
+    border-cut clusters from the scan before (``PipelineConfig.track_border_cut_m``)?"""
+    return getattr(getattr(recognizer, "config", None), "track_border_cut_m", None) is not None
+
+
+@dataclass(frozen=True)
+class TrackPrior:
+    """An object recognised in an earlier scan, predicted in this scan's sensor frame.
+
+    Attributes
+    ----------
+    label : str
+    T_sensor_object : ndarray (4, 4)
+        The predicted pose in the frame this scan is recognised in.
+    scan_id : int
+        The scan it was recognised in.
+    """
+
+    label: str
+    T_sensor_object: np.ndarray
+    scan_id: int
+
+
+def predicted_priors(detections: Sequence[Detection], motion: Any, T_vehicle_sensor: Any, to_stamp_s: float,
+                     max_age_s: float = MAX_TRACK_AGE_S) -> list[TrackPrior]:
+    """The ``detections`` of an earlier scan (each in the sensor frame at its own stamp) carried to the sensor frame
+    at ``to_stamp_s`` by the vehicle's ``motion`` (:class:`~semslam.pipeline.deskew.ScanMotion` over a window
+    holding both stamps; None: no navigation, no priors). Detections older than ``max_age_s`` or without a finite
+    stamp are left out."""
+    from .deskew import sensor_motion_between
+
+    if motion is None:
+        return []
+    out = []
+    for d in detections:
+        age = float(to_stamp_s) - float(d.stamp_s)
+        if not (0.0 <= age <= max_age_s) or not motion.stamps_s[0] <= d.stamp_s <= motion.stamps_s[-1]:
+            continue
+        T_now_then = sensor_motion_between(motion, T_vehicle_sensor, float(d.stamp_s), float(to_stamp_s))
+        out.append(TrackPrior(str(d.label), T_now_then @ d.T_sensor_object.matrix, int(d.scan_id)))
+    return out
+
+
+def track_rejected(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterOutcome], detections: list[Detection],
+                   priors: Sequence[TrackPrior], timings: dict) -> tuple[list[ClusterOutcome], list[Detection]]:
+    """The border-cut clusters of a recognised scan (its context, segmentation, outcomes and detections) rejected, or
+    recognised alone as another class than a prior about them, tried at those priors: the outcomes and the
+    detections with those that verify added or replaced (``timings["tracking"]``, ms)."""
+    t0 = time.perf_counter()
+    outcomes, detections = list(outcomes), list(detections)
+    max_shift = rec.config.track_border_cut_m
+    classes = set(rec.db.classes)
+    known = [p for p in priors if p.label in classes]
+    for k, o in enumerate(outcomes):
+        if not o.touches_border or not known or not (o.detection is None or _alone(o, outcomes)):
+            continue
+        cluster = seg.clusters[o.cluster_index]
+        centroid = cluster.points_xyz_m.mean(axis=0)
+        others = [d for d in detections if d is not o.detection]
+        for prior in _candidates(rec, known, centroid, others, np.asarray(o.extent_m)):
+            if o.detection is not None and o.detection.label == prior.label:  # what it was: nothing to decide
+                continue
+            det, why = _tracked(rec, ctx, seg, o, prior, max_shift, timings)
+            if det is None:
+                _log.debug("scan %d cluster %d as the %s of scan %d: %s", ctx.scan_id, o.cluster_index, prior.label,
+                           prior.scan_id, why)
+                continue
+            det.extras["tracked_from_scan"] = prior.scan_id
+            alone = f"alone {o.reason}" if o.detection is None else f"alone as {o.label}"
+            reason = (f"detected (unreliable pose), tracked from scan {prior.scan_id} "
+                      f"(nearest {o.nearest_label or 'none'}; {alone})")
+            outcomes[k] = dataclasses.replace(o, label=prior.label, detection=det, reason=reason)
+            detections = others + [det]
+            break
+    timings["tracking"] = (time.perf_counter() - t0) * 1e3
+    return outcomes, detections
+
+
+def _alone(o: ClusterOutcome, outcomes: list[ClusterOutcome]) -> bool:
+    """Is ``o``'s detection its own (not a union's, nor one it is a fragment of)?"""
+    return sum(x.detection is o.detection for x in outcomes) == 1 and "fragments" not in o.detection.extras
+
+
+def _candidates(rec: Any, priors: Sequence[TrackPrior], centroid: np.ndarray, detections: list[Detection],
+                extent_m: np.ndarray) -> list[TrackPrior]:
+    """The priors a cluster (its centroid, principal extents) may be: predicted within their class's radius (half its
+    box's diagonal, plus ``track_border_cut_m``) of the centroid, of a class whose size test the cluster passes, not
+    recognised in this scan already (a detection of the class within that radius of the prediction), nearest
+    first."""
+    found = []
+    for p in priors:
+        radius = 0.5 * float(np.linalg.norm(rec.db.class_info(p.label).size_xyz_m)) + rec.config.track_border_cut_m
+        at = p.T_sensor_object[:3, 3]
+        d = float(np.linalg.norm(at - centroid))
+        if d > radius or size_rejection(rec, p.label, extent_m):
+            continue
+        if any(det.label == p.label and np.linalg.norm(det.T_sensor_object.translation_m - at) <= radius
+               for det in detections):
+            continue
+        found.append((d, p))
+    return [p for _, p in sorted(found, key=lambda x: x[0])]
+
+
+def _tracked(rec: Any, ctx: ScanContext, seg: Any, o: ClusterOutcome, prior: TrackPrior, max_shift_m: float,
+             timings: dict) -> tuple[Detection | None, str]:
+    """The detection of cluster ``o`` as ``prior``'s object, ICP from the prediction, or None and why not."""
+    cluster = seg.clusters[o.cluster_index]
+    seed = ctx.cluster_seed + o.cluster_index
+    desc = describe(rec, cluster, seed)
+    if isinstance(desc, str):
+        return None, desc
+    match = rec.recognizer.class_match(desc, prior.label)
+    hyp = Hypothesis(_input_indices(seg, o.cluster_index), cluster, prior.label, match.view_index, match,
+                     touches_border=True, init_T_sensor_object=prior.T_sensor_object)
+    try:
+        det = pose_hypothesis(rec, ctx, seg, hyp, seed=seed, timings=timings)
+    except RegistrationError as exc:
+        return None, str(exc)
+    cfg = rec.config
+    failed = verification_failure(det, cfg.verify_min_fitness, cfg.verify_max_visibility,
+                                  cfg.verify_max_plane_penetration_m)
+    if failed:
+        return None, failed
+    shift = float(np.linalg.norm(det.T_sensor_object.translation_m - prior.T_sensor_object[:3, 3]))
+    if shift > max_shift_m:
+        return None, f"moved {1e3 * shift:.1f} mm from the prediction (> {1e3 * max_shift_m:g} mm)"
+    det.extras["track_shift_m"] = shift
+    return det, ""
