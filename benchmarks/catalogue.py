@@ -112,9 +112,9 @@ CONFIGS = {
                                     if f.name not in ("descriptor", "classifier")},
                                  "pose": dataclasses.replace(_SEABED.pose, translation_steps_m=(
                                      0.03, 0.03, 0.015, 0.015, 0.008, 0.008, 0.006))},
-    # seabed with border-cut clusters tracked from the scan before (session 30, semslam.pipeline.tracking)
-    "seabed_tracking": {**{f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
-                           if f.name not in ("descriptor", "classifier")}, "track_border_cut_m": 0.03},
+    # seabed before session 30: no border-cut cluster tracked from the scan before (semslam.pipeline.tracking)
+    "seabed_untracked": {**{f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
+                            if f.name not in ("descriptor", "classifier")}, "track_border_cut_m": None},
     "catalogue_border_unionscene": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                                     "size_reference": "principal", "parts": PartsConfig(scene_visibility=True),
                                     "verify_visibility_image": "border"},

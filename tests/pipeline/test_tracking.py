@@ -135,17 +135,14 @@ def test_the_runner_gives_each_scan_the_scan_befores_objects_where_the_navigatio
 
 @pytest.fixture(scope="module")
 def cut_socket(builtin_db_fresh):
-    """A simulated laser scan (mission seed 4, scan 24) whose reducing socket the seabed settings recognise whole,
+    """A simulated laser scan (mission seed 4, scan 24) whose reducing socket the seabed preset recognises whole,
     and the same scan cut at the socket's centre as the swath's border would cut it."""
-    import dataclasses
-
     from semslam.pipeline import ScanRecognizer
     from semslam.run.config import load_run_config
     from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
 
     mission = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1)), seed=4)
-    cfg = dataclasses.replace(load_run_config(preset="seabed").pipeline_config(), track_border_cut_m=0.03)
-    rec = ScanRecognizer(builtin_db_fresh, cfg)
+    rec = ScanRecognizer(builtin_db_fresh, load_run_config(preset="seabed").pipeline_config())  # it tracks
     cloud = mission.load_scan(24)
     (whole,) = rec.recognize(cloud, seed=24).detections
     c = whole.T_sensor_object.translation_m

@@ -66,8 +66,8 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     """objects resting on the seabed beside structure: the cluttered recipe (no posed object more than 10 mm behind
     the plane it lies on included), a wall or slope removed as a second plane, a class failing verification followed
     by the next one, border-cut clusters searched across the object, the scan's other clusters about a cluster seen
-    by the pose search, verification allowing for the laser camera's shadows, the pose kept upright with the AHRS's
-    gravity (docs/configuration.md)."""
+    by the pose search, verification allowing for the laser camera's shadows, border-cut clusters tracked from the
+    scan before, the pose kept upright with the AHRS's gravity (docs/configuration.md)."""
     seabed, cluttered = load_run_config(preset="seabed"), load_run_config(preset="cluttered")
     p, c = seabed.pipeline_config(), cluttered.pipeline_config()
     assert p.segmentation.max_planes == 2 and c.segmentation.max_planes == 1
@@ -79,8 +79,9 @@ def test_seabed_preset_is_cluttered_with_a_second_plane_and_upright_poses():
     assert p.parts.view_gaps and c.parts.view_gaps  # part gaps learnt from the views in both
     assert p.parts == c.parts and p.parts.max_parts == 4 and p.parts.detected_parts  # a gate valve's parts (catalogue)
     assert p.pose.n_candidates == 256 and c.pose.n_candidates == 96  # upright: 1296 orientations per up ranked
+    assert p.track_border_cut_m == 0.03 and c.track_border_cut_m is None  # not measured on the catalogue's own
     assert dataclasses.replace(p, segmentation=c.segmentation, verify_next_classes=0, pose=c.pose,
-                               pose_surroundings=False, verify_camera_shadows=False) == c
+                               pose_surroundings=False, verify_camera_shadows=False, track_border_cut_m=None) == c
     assert seabed.run.up_from_attitude and not cluttered.run.up_from_attitude
 
 
