@@ -50,6 +50,7 @@ def detection_summary(scans: list[dict], n_kept: int) -> dict:
         "n_clusters": int(sum(s["n_clusters"] for s in scans)),
         "n_detections": int(sum(s["n_detections"] for s in scans)),
         "n_kept": int(n_kept),
+        "n_tracked": int(sum(s.get("n_tracked", 0) for s in scans)),  # from the scan before (pipeline.tracking)
         "scan_latency_ms_median": float(np.median(total)) if total.size else float("nan"),
         "scan_latency_ms_p90": float(np.percentile(total, 90)) if total.size else float("nan"),
     }
@@ -111,7 +112,8 @@ def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_
     kept = [d for d in result.detections if d.reliable or keep_unreliable]
     stats = {"scan_id": scan_id, "stamp_s": end_stamp_s, "n_points": cloud.n_points,
              "n_clusters": len(result.clusters), "n_detections": len(result.detections),
-             "n_kept": len(kept), "deskewed": deskewed, "timings_ms": dict(result.timings_ms)}
+             "n_kept": len(kept), "n_tracked": sum("tracked_from_scan" in d.extras for d in result.detections),
+             "deskewed": deskewed, "timings_ms": dict(result.timings_ms)}
     return kept, stats, result
 
 

@@ -173,7 +173,8 @@ def _moved(T: np.ndarray, shift_m, yaw_deg: float) -> np.ndarray:
 def test_a_border_cut_cluster_rejected_alone_is_recognised_at_the_scan_befores_pose(cut_socket):
     """The half socket is rejected alone (its descriptor beyond the rejection threshold); given the whole socket's
     pose off by 2 cm and 3 deg as the prior, ICP brings it back within 6 mm of the whole view's pose (measured
-    1.5 mm): flagged unreliable (border-cut), and saying whence it came."""
+    1.4 mm): flagged unreliable (border-cut), and saying whence it came."""
+    from semslam.pipeline.dataset_detection import detect_scan
     from semslam.pipeline.tracking import TrackPrior
 
     rec, whole, cut, cloud = cut_socket
@@ -187,6 +188,11 @@ def test_a_border_cut_cluster_rejected_alone_is_recognised_at_the_scan_befores_p
     assert tracked.extras["tracked_from_scan"] == 23 and "tracked from scan 23" in o.reason
     assert np.linalg.norm(tracked.T_sensor_object.translation_m - whole.T_sensor_object.translation_m) < 0.006
     assert result.timings_ms["tracking"] > 0
+    # through a runner's step: counted; the filter takes it only with keep_unreliable (it is border-cut)
+    for keep in (False, True):
+        kept, stats, _ = detect_scan(rec, cut, scan_id=24, start_stamp_s=0.0, end_stamp_s=0.0, point_stamps_s=None,
+                                     seed=0, keep_unreliable=keep, priors=[prior])
+        assert stats["n_tracked"] == 1 and [d.label for d in kept] == (["reducing_socket"] if keep else [])
 
 
 def test_a_prior_elsewhere_of_another_class_or_already_seen_adds_nothing(cut_socket):
