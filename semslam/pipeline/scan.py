@@ -256,7 +256,8 @@ class ScanRecognizer:
         priors : sequence of TrackPrior, or a callable returning one, optional
             The objects of the scan before, predicted in this scan's frame
             (:func:`~semslam.pipeline.tracking.predicted_priors`): with ``PipelineConfig.track_border_cut_m`` the
-            border-cut clusters rejected alone are tried as them (:mod:`semslam.pipeline.tracking`). A callable is
+            border-cut clusters rejected alone, or recognised alone as another class, are tried as them
+            (:mod:`semslam.pipeline.tracking`). A callable is
             called once this scan's own stages are done (a runner recognising scans at once waits there for the
             scan before).
         """

@@ -102,10 +102,15 @@ def track_rejected(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterO
         cluster = seg.clusters[o.cluster_index]
         centroid = cluster.points_xyz_m.mean(axis=0)
         others = [d for d in detections if d is not o.detection]
+        desc = None  # the cluster's descriptors, once for all its priors
         for prior in _candidates(rec, known, centroid, others, np.asarray(o.extent_m)):
             if o.detection is not None and o.detection.label == prior.label:  # what it was: nothing to decide
                 continue
-            det, why = _tracked(rec, ctx, seg, o, prior, max_shift, timings)
+            if desc is None:
+                desc = describe(rec, cluster, ctx.cluster_seed + o.cluster_index)
+            if isinstance(desc, str):  # no descriptor: nothing to score a pose of it with
+                break
+            det, why = _tracked(rec, ctx, seg, o, prior, desc, max_shift, timings)
             if det is None:
                 _log.debug("scan %d cluster %d as the %s of scan %d: %s", ctx.scan_id, o.cluster_index, prior.label,
                            prior.scan_id, why)
@@ -146,14 +151,12 @@ def _candidates(rec: Any, priors: Sequence[TrackPrior], centroid: np.ndarray, de
     return [p for _, p in sorted(found, key=lambda x: x[0])]
 
 
-def _tracked(rec: Any, ctx: ScanContext, seg: Any, o: ClusterOutcome, prior: TrackPrior, max_shift_m: float,
-             timings: dict) -> tuple[Detection | None, str]:
-    """The detection of cluster ``o`` as ``prior``'s object, ICP from the prediction, or None and why not."""
+def _tracked(rec: Any, ctx: ScanContext, seg: Any, o: ClusterOutcome, prior: TrackPrior, desc: Any,
+             max_shift_m: float, timings: dict) -> tuple[Detection | None, str]:
+    """The detection of cluster ``o`` (its descriptors ``desc``) as ``prior``'s object, ICP from the prediction, or
+    None and why not."""
     cluster = seg.clusters[o.cluster_index]
     seed = ctx.cluster_seed + o.cluster_index
-    desc = describe(rec, cluster, seed)
-    if isinstance(desc, str):
-        return None, desc
     match = rec.recognizer.class_match(desc, prior.label)
     hyp = Hypothesis(_input_indices(seg, o.cluster_index), cluster, prior.label, match.view_index, match,
                      touches_border=True, init_T_sensor_object=prior.T_sensor_object)

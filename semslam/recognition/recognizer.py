@@ -98,16 +98,20 @@ class Recognizer:
     def class_match(self, descriptors: ViewDescriptors, label: str) -> Match:
         """The nearest view of class ``label`` to ``descriptors``, whether or not the rejection accepts it (a cluster
         tracked from an earlier scan: :mod:`semslam.pipeline.tracking`)."""
-        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
-        dist = chi2_distances(x, self.classifier.X_fit_)[0]
-        rows = np.flatnonzero(np.asarray(self.db.labels).astype(str) == label)
+        dist, labels = self._view_distances(descriptors)
+        rows = np.flatnonzero(labels == label)
         if not len(rows):
             raise InputError(f"The 'label' argument of Recognizer.class_match must be a class of the database "
-                             f"{sorted(set(map(str, self.db.labels)))}. Got {label!r} instead.")
+                             f"{sorted(set(labels))}. Got {label!r} instead.")
         i = int(rows[np.argmin(dist[rows])])
         thr = self.classifier.rejection_
         return Match(label, i, label, float(dist[i]), float("inf") if thr is None else thr.threshold_of(label),
                      descriptors)
+
+    def _view_distances(self, descriptors: ViewDescriptors) -> tuple[np.ndarray, np.ndarray]:
+        """The chi-square distance of ``descriptors`` to every database view (n_views,) and the views' labels."""
+        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
+        return chi2_distances(x, self.classifier.X_fit_)[0], np.asarray(self.db.labels).astype(str)
 
     def match(self, cloud: PointCloud, *, seed: int | np.random.Generator = 0) -> Match:
         """Describe ``cloud`` (any frame, viewpoint = sensor origin) as the database's views and match it."""
@@ -118,9 +122,7 @@ class Recognizer:
         classes a cluster could be when ``exclude``'s hypothesis fails verification
         (``PipelineConfig.verify_next_classes``). Each is an accepted :class:`Match` of that class (its distance
         within that class's threshold)."""
-        x = combine_descriptors(self.descriptor, descriptors.esf, descriptors.vfh)
-        dist = chi2_distances(x, self.classifier.X_fit_)[0]
-        labels = np.asarray(self.db.labels).astype(str)
+        dist, labels = self._view_distances(descriptors)
         thr = self.classifier.rejection_
         found = []
         for label in np.unique(labels):

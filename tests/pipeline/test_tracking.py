@@ -216,7 +216,8 @@ class _Stage:
 
         self.config = PipelineConfig(verify_min_fitness=0.9, track_border_cut_m=0.03)
         info = SimpleNamespace(size_xyz_m=np.full(3, 0.2))
-        self.db = SimpleNamespace(classes=["a", "b", "c"], class_info=lambda label: info)
+        self.db = SimpleNamespace(classes=["a", "b", "c"], class_info=lambda label: info,
+                                  describe=lambda cluster, seed: ("descriptors", seed))
 
     def class_size_limit_m(self, label):
         return 1.0
@@ -246,19 +247,19 @@ def test_a_border_cut_cluster_taken_alone_for_another_class_becomes_the_predicte
 
     tried = []
 
-    def verifies(rec, ctx, seg, o, prior, max_shift, timings):
-        tried.append((o.cluster_index, prior.label))
+    def verifies(rec, ctx, seg, o, prior, desc, max_shift, timings):
+        tried.append((o.cluster_index, prior.label, desc))
         return _detection(prior.label, prior.T_sensor_object, 1.0, scan_id=9), ""
 
     monkeypatch.setattr(tracking, "_tracked", verifies)
     seg = SimpleNamespace(clusters=[PointCloud(np.array([[x, 0.0, 0.0], [x + 0.02, 0.0, 0.0]])) for x in range(4)])
-    ctx = SimpleNamespace(scan_id=9)
+    ctx = SimpleNamespace(scan_id=9, cluster_seed=100)
     b0, union, c3 = _detection("b", at(0.0), 1.0), _detection("c", at(1.5), 1.0), _detection("b", at(3.0), 1.0)
     outcomes = [_outcome(0, "b", b0), _outcome(1, "c", union), _outcome(2, "c", union, border=False),
                 _outcome(3, "b", c3, border=False)]
     priors = [TrackPrior("a", at(x + 0.01), 8) for x in (0.0, 1.0, 3.0, 5.0)]
     out, dets = tracking.track_rejected(_Stage(), ctx, seg, outcomes, [b0, union, c3], priors, {})
-    assert tried == [(0, "a")]
+    assert tried == [(0, "a", ("descriptors", 100))]  # the cluster's own descriptors (its seed)
     assert out[0].label == "a" and out[0].detection.extras["tracked_from_scan"] == 8
     assert "tracked from scan 8" in out[0].reason and "alone as b" in out[0].reason
     assert out[1:] == outcomes[1:]
