@@ -97,6 +97,7 @@ def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_
     ``stats["deskewed"]`` says whether it was. ``priors``: the scan before's objects in this scan's frame, or a
     callable giving them (:meth:`ScanRecognizer.recognize`; :func:`priors_from_scan_before`)."""
     from .deskew import deskew_scan, deskews
+    from .tracking import tracks
 
     deskewed = motion is not None and deskews(recognizer, point_stamps_s)
     measured = cloud if deskewed else None
@@ -105,6 +106,8 @@ def detect_scan(recognizer: ScanRecognizer, cloud, *, scan_id: int, start_stamp_
     kw = {"measured": measured} if deskewed else {}  # (a duck-typed recogniser need not know the keywords)
     if priors is not None:
         kw["priors"] = priors
+    if tracks(recognizer):  # the scan after may still track its border-cut clusters (track_from_scan_after)
+        kw["keep_context"] = True
     result = recognizer.recognize(cloud, seed=scan_seed(seed, scan_id), stamp_s=end_stamp_s, scan_id=scan_id,
                                   point_stamps_s=point_stamps_s, up_scanner=up_scanner, **kw)
     if deskewed:  # each detection from the scan's end to its own points' median stamp: the motion between cancels
@@ -149,28 +152,44 @@ def detect_dataset(dataset: Dataset, recognizer: ScanRecognizer, *, seed: int = 
         raise InputError(f"The 'recognizer' argument of detect_dataset must be a ScanRecognizer. Got "
                          f"{type(recognizer).__name__} instead.")
     from .deskew import deskew_lookahead_s
+    from .tracking import follows_closely
 
     out = DatasetDetections()
     scans = dataset.scans
-    before = None  # the scan before's detections and first stamp, for tracking
+    before = None  # the scan before: its record, cloud, detect_scan output and first stamp (tracking)
+
+    def final(scan):  # a scan's output made final: kept, counted, handed to on_scan
+        rec, cloud, (kept, stats, result), _ = scan
+        if kept:
+            out.detections_by_scan[rec.scan_id] = kept
+        out.scans.append(stats)
+        if on_scan is not None:
+            on_scan(rec, cloud, result)
+
     with progress_steps(progress, len(scans), "recognise", "scan") as step:
         for rec in scans:
             cloud = dataset.load_scan(rec.scan_id)
             stamps = dataset.point_stamps_s(rec, cloud)
             up = up_in_scanner(dataset, 0.5 * (rec.start_stamp_s + rec.end_stamp_s)) if up_from_attitude else None
-            kept, stats, result = detect_scan(recognizer, cloud, scan_id=rec.scan_id, start_stamp_s=rec.start_stamp_s,
-                                              end_stamp_s=rec.end_stamp_s, point_stamps_s=stamps, seed=seed,
-                                              keep_unreliable=keep_unreliable, up_scanner=up,
-                                              motion=_scan_motion(dataset, stamps, rec.end_stamp_s,
-                                                                  deskew_lookahead_s(recognizer)),
-                                              T_vehicle_scanner=dataset.vehicle.scanner.T_vehicle_scanner,
-                                              priors=_dataset_priors(dataset, recognizer, before, rec))
-            before = (result.detections, first_stamp_s(stamps, rec.start_stamp_s))
-            if kept:
-                out.detections_by_scan[rec.scan_id] = kept
-            out.scans.append(stats)
-            if on_scan is not None:
-                on_scan(rec, cloud, result)
+            link = _motion_since(dataset, recognizer, before, rec)
+            motion = _scan_motion(dataset, stamps, rec.end_stamp_s, deskew_lookahead_s(recognizer))
+            T_vs = dataset.vehicle.scanner.T_vehicle_scanner
+            scan_out = detect_scan(recognizer, cloud, scan_id=rec.scan_id, start_stamp_s=rec.start_stamp_s,
+                                   end_stamp_s=rec.end_stamp_s, point_stamps_s=stamps, seed=seed,
+                                   keep_unreliable=keep_unreliable, up_scanner=up,
+                                   motion=motion, T_vehicle_scanner=T_vs,
+                                   priors=None if link is None else priors_from_scan_before(
+                                       before[2][2].detections, link, T_vs, rec.end_stamp_s))
+            if before is not None:  # the scan before, tracked from this one when it follows closely, is final
+                brec = before[0]
+                after = scan_out[2].detections if follows_closely(before[3], brec.start_stamp_s, brec.end_stamp_s,
+                                                                  rec.end_stamp_s) else None
+                final(before[:2] + (track_from_scan_after(recognizer, before[2], after, link, T_vs, keep_unreliable),
+                                    None))
+                step()
+            before = (rec, cloud, scan_out, first_stamp_s(stamps, rec.start_stamp_s))
+        if before is not None:
+            final(before[:2] + (final_scan(before[2]), None))
             step()
     return out
 
@@ -189,6 +208,50 @@ def priors_from_scan_before(detections_before, motion, T_vehicle_scanner, end_st
     return priors
 
 
+def track_from_scan_after(recognizer, scan_out, detections_after, motion, T_vehicle_scanner,
+                          keep_unreliable: bool = False):
+    """A scan's :func:`detect_scan` output ``scan_out`` made final with the objects of the scan after
+    (``detections_after``, each at its own stamp), carried back into its frame by the vehicle's ``motion`` over a
+    window holding both scans: its border-cut clusters rejected alone (an object entering the swath) are tried as
+    them (:func:`~semslam.pipeline.tracking.track_rejected`; ``PipelineConfig.track_border_cut_m``). The result
+    returned no longer holds its context (:func:`final_scan`). ``detections_after`` None or ``motion`` None: only
+    made final."""
+    from .tracking import predicted_priors, track_rejected, tracks
+
+    kept, stats, result = scan_out
+    ctx = getattr(result, "context", None)  # (a duck-typed recogniser's result need not have one)
+    if ctx is None or motion is None or not detections_after or not tracks(recognizer):
+        return final_scan(scan_out)
+    priors = predicted_priors(detections_after, motion, T_vehicle_scanner, ctx.stamp_s)
+    timings = {"descriptors": 0.0, "matching": 0.0, "pose": 0.0}
+    clusters, dets = track_rejected(recognizer, ctx, result.segmentation, result.clusters, result.detections, priors,
+                                    timings)
+    before = {id(d) for d in result.detections}
+    new = {id(d) for d in dets if id(d) not in before}
+    if not new:
+        return final_scan(scan_out)
+    spent = dict(result.timings_ms)  # its stages' time, and the total, grow by the time spent tracking it
+    for key, ms in dict(timings, total=timings["tracking"]).items():
+        spent[key] = spent.get(key, 0.0) + ms
+    from dataclasses import replace
+
+    result = replace(result, detections=dets, clusters=clusters, timings_ms=spent, context=None)
+    if stats.get("deskewed"):  # the new ones from the scan's end to their own stamps, as detect_scan does
+        result = _at_own_stamps(result, motion, T_vehicle_scanner, ctx.stamp_s, only=new)
+    kept = [d for d in result.detections if d.reliable or keep_unreliable]
+    stats = dict(stats, n_detections=len(result.detections), n_kept=len(kept), timings_ms=dict(spent),
+                 n_tracked=sum("tracked_from_scan" in d.extras for d in result.detections))
+    return kept, stats, result
+
+
+def final_scan(scan_out):
+    """A :func:`detect_scan` output without its result's context (nothing more will be tracked in it)."""
+    from dataclasses import replace
+
+    kept, stats, result = scan_out
+    return scan_out if getattr(result, "context", None) is None else (kept, stats, replace(result, context=None))
+
+
 def first_stamp_s(point_stamps_s, start_stamp_s: float) -> float:
     """The stamp of a scan's first point (its start without per-point stamps)."""
     st = None if point_stamps_s is None else np.asarray(point_stamps_s, dtype=float)
@@ -196,19 +259,19 @@ def first_stamp_s(point_stamps_s, start_stamp_s: float) -> float:
     return min(float(start_stamp_s), float(finite.min())) if len(finite) else float(start_stamp_s)
 
 
-def _dataset_priors(dataset: Dataset, recognizer: ScanRecognizer, before, rec: ScanRecord):
-    """:func:`priors_from_scan_before` of a dataset's scan ``rec`` (None when tracking is off or there is no scan
-    before), the motion from the dataset's attitude and DVL logs."""
+def _motion_since(dataset: Dataset, recognizer: ScanRecognizer, before, rec: ScanRecord):
+    """The vehicle's motion from the scan before's first point (``before[3]``) to the end of scan ``rec``, from the
+    dataset's attitude and DVL logs: what tracking carries objects between the two scans with (None when tracking
+    is off or there is no scan before)."""
     from .deskew import deskew_lookahead_s, scan_motion
     from .tracking import tracks
 
     if before is None or not tracks(recognizer):
         return None
     a, d = dataset.attitude, dataset.dvl
-    motion = scan_motion(a.stamp_s, a.rpy_rad, d.stamp_s, d.velocity_body_mps, d.valid,
-                         dataset.vehicle.dvl.T_vehicle_dvl.rotation, before[1], rec.end_stamp_s,
-                         lookahead_s=deskew_lookahead_s(recognizer))
-    return priors_from_scan_before(before[0], motion, dataset.vehicle.scanner.T_vehicle_scanner, rec.end_stamp_s)
+    return scan_motion(a.stamp_s, a.rpy_rad, d.stamp_s, d.velocity_body_mps, d.valid,
+                       dataset.vehicle.dvl.T_vehicle_dvl.rotation, before[3], rec.end_stamp_s,
+                       lookahead_s=deskew_lookahead_s(recognizer))
 
 
 def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float, lookahead_s: float):
@@ -224,8 +287,10 @@ def _scan_motion(dataset: Dataset, point_stamps_s, end_stamp_s: float, lookahead
                        dataset.vehicle.dvl.T_vehicle_dvl.rotation, *span, lookahead_s=lookahead_s)
 
 
-def _at_own_stamps(result: RecognitionResult, motion, T_vehicle_scanner, ref_stamp_s: float) -> RecognitionResult:
-    """``result`` with every detection (posed in the sensor frame at ``ref_stamp_s``) carried to its own stamp."""
+def _at_own_stamps(result: RecognitionResult, motion, T_vehicle_scanner, ref_stamp_s: float,
+                   only: set | None = None) -> RecognitionResult:
+    """``result`` with every detection (posed in the sensor frame at ``ref_stamp_s``) carried to its own stamp (only
+    those whose ``id`` is in ``only`` when given)."""
     from dataclasses import replace
 
     from ..geometry import RigidTransform
@@ -233,9 +298,11 @@ def _at_own_stamps(result: RecognitionResult, motion, T_vehicle_scanner, ref_sta
 
     moved = {}
     for d in result.detections:
+        if only is not None and id(d) not in only:
+            continue
         A = sensor_motion_between(motion, T_vehicle_scanner, ref_stamp_s, float(d.stamp_s))
         T, cov = reexpressed(A, np.asarray(d.T_sensor_object.matrix), d.covariance_6x6)
         moved[id(d)] = replace(d, T_sensor_object=RigidTransform(T), covariance_6x6=cov)
     clusters = [replace(c, detection=moved.get(id(c.detection), c.detection)) if c.detection is not None else c
                 for c in result.clusters]
-    return replace(result, detections=[moved[id(d)] for d in result.detections], clusters=clusters)
+    return replace(result, detections=[moved.get(id(d), d) for d in result.detections], clusters=clusters)

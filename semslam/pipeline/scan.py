@@ -26,7 +26,7 @@ models of each class) is prepared once, in the constructor or lazily on first us
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -63,12 +63,18 @@ class RecognitionResult:
     timings_ms : dict
         Wall time per stage summed over clusters: ``segmentation``, ``descriptors``, ``matching``, ``pose``,
         ``total`` (milliseconds); ``parts`` with ``PipelineConfig.parts`` (its unions' poses count in ``pose`` too).
+    context : ScanContext or None
+        The scan's inputs as recognised (the frame its clusters are in), kept (``recognize(keep_context=True)``)
+        while a runner may still track its border-cut clusters from the scan after
+        (:func:`~semslam.pipeline.dataset_detection.track_from_scan_after`); None once its result is final, or not
+        kept. Not part of :meth:`to_dict`.
     """
 
     detections: list[Detection]
     clusters: list[ClusterOutcome]
     segmentation: SegmentationResult
     timings_ms: dict[str, float]
+    context: Any = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"detections": [d.to_dict() for d in self.detections],
@@ -231,7 +237,8 @@ class ScanRecognizer:
     # -- one scan ---------------------------------------------------------------------------------
     def recognize(self, scan: PointCloud, *, seed: int | np.random.Generator = 0, stamp_s: float = float("nan"),
                   scan_id: int = -1, point_stamps_s: Any = None, up_scanner: Any = None,
-                  measured: PointCloud | None = None, priors: Any = None) -> RecognitionResult:
+                  measured: PointCloud | None = None, priors: Any = None,
+                  keep_context: bool = False) -> RecognitionResult:
         """Segment ``scan``, recognise each cluster and estimate the pose of the recognised ones.
 
         Parameters
@@ -260,6 +267,9 @@ class ScanRecognizer:
             (:mod:`semslam.pipeline.tracking`). A callable is
             called once this scan's own stages are done (a runner recognising scans at once waits there for the
             scan before).
+        keep_context : bool
+            Keep the scan's context in the result (``RecognitionResult.context``: the scan's clouds) for tracking
+            from the scan after (a runner's; it drops it once the result is final).
         """
         cfg = self.config
         ctx = scan_context(scan, default_up_scanner=cfg.up_scanner, seed=seed, stamp_s=stamp_s, scan_id=scan_id,
@@ -285,7 +295,7 @@ class ScanRecognizer:
             t_start += time.perf_counter() - t_wait  # the wait for the scan before is not this scan's time
             outcomes, detections = track_rejected(self, ctx, seg, outcomes, detections, given, timings)
         timings["total"] = (time.perf_counter() - t_start) * 1e3
-        return RecognitionResult(detections, outcomes, seg, timings)
+        return RecognitionResult(detections, outcomes, seg, timings, context=ctx if keep_context else None)
 
 
 def recognize_scan(scan: PointCloud, db: ViewDatabase, config: PipelineConfig | None = None, *,

@@ -1,4 +1,4 @@
-"""Border-cut clusters recognised by tracking (``PipelineConfig.track_border_cut_m``).
+"""Border-cut clusters recognised by tracking (``PipelineConfig.track_border_cut_m``): from the scan before and after.
 
 A cluster cut by the scan's border is often too little of its object to tell it from its neighbours in the catalogue
 (a strip of a flange's rim, a tee without the arm that makes it a tee): alone it is rejected, or taken for the
@@ -13,9 +13,12 @@ enter the filter) and says whence it came (``extras["tracked_from_scan"]``; the 
 A border-cut cluster recognised alone as another class than the object predicted there is tried the same way: when
 the predicted object's pose verifies too, the scan before's view (the whole object) decides what it is.
 
-The prior comes from the detections of the scan before (tracked ones included, so an object is followed out of the
-swath); an object entering the swath has none, so its first cut views stay rejected. Nothing here reads more than
-one earlier scan and the navigation between the two."""
+The priors come from the detections of the scan before (tracked ones included, so an object is followed out of the
+swath), given to the scan's recognition, and from those of the scan after (an object entering the swath, recognised
+whole one scan later), carried back: a runner holds each scan's result, with its context, until the scan after it is
+recognised and then makes it final (:func:`~semslam.pipeline.dataset_detection.track_from_scan_after`), when that
+scan ends within :data:`SPANS_TO_THE_SCAN_AFTER` of its spans (:func:`follows_closely`; after a gap in the scans it
+is not waited for). Nothing here reads more than the scans either side and the navigation between them."""
 
 from __future__ import annotations
 
@@ -34,18 +37,31 @@ from .hypothesis import Hypothesis, pose_hypothesis, verification_failure
 from .scan_records import ClusterOutcome, ScanContext
 from .stages import describe, size_rejection
 
-__all__ = ["MAX_TRACK_AGE_S", "TrackPrior", "predicted_priors", "track_rejected", "tracks"]
+__all__ = ["MAX_TRACK_AGE_S", "SPANS_TO_THE_SCAN_AFTER", "TrackPrior", "follows_closely", "predicted_priors",
+           "track_rejected", "tracks"]
 
 _log = logging.getLogger("semslam.pipeline")
 
 #: the oldest detection (s before the scan's stamp) that is carried into a scan as a prior
 MAX_TRACK_AGE_S = 3.0
+#: a scan is tracked from the scan after it when that one ends within this many of its spans from its first point
+#: (the next scan back to back ends two spans after it: a runner's filters wait that long for it,
+#: :meth:`semslam.run.scan_flow.ScanFlow.hold_s`)
+SPANS_TO_THE_SCAN_AFTER = 3.0
 
 
 def tracks(recognizer: Any) -> bool:
     """Does ``recognizer`` (a :class:`~semslam.pipeline.ScanRecognizer`, or any object with a ``config``) track
     border-cut clusters from the scan before (``PipelineConfig.track_border_cut_m``)?"""
     return getattr(getattr(recognizer, "config", None), "track_border_cut_m", None) is not None
+
+
+def follows_closely(first_stamp_s: float, start_stamp_s: float, end_stamp_s: float, after_end_stamp_s: float) -> bool:
+    """Is a scan (its first point's stamp, its start and end) tracked from the scan after it, ending at
+    ``after_end_stamp_s``? When that one ends within :data:`SPANS_TO_THE_SCAN_AFTER` of its spans from its first
+    point: a scan after a gap in the scans (a turn, a pause) is not waited for, by any runner alike."""
+    span = max(0.0, float(end_stamp_s) - float(start_stamp_s))
+    return float(after_end_stamp_s) - float(first_stamp_s) <= SPANS_TO_THE_SCAN_AFTER * span
 
 
 @dataclass(frozen=True)
@@ -68,10 +84,11 @@ class TrackPrior:
 
 def predicted_priors(detections: Sequence[Detection], motion: Any, T_vehicle_sensor: Any, to_stamp_s: float,
                      max_age_s: float = MAX_TRACK_AGE_S) -> list[TrackPrior]:
-    """The ``detections`` of an earlier scan (each in the sensor frame at its own stamp) carried to the sensor frame
-    at ``to_stamp_s`` by the vehicle's ``motion`` (:class:`~semslam.pipeline.deskew.ScanMotion` over a window
-    holding both stamps; None: no navigation, no priors). Detections older than ``max_age_s`` or without a finite
-    stamp are left out."""
+    """The ``detections`` of another scan (each in the sensor frame at its own stamp; the scan before, or the scan
+    after) carried to the sensor frame at ``to_stamp_s`` by the vehicle's ``motion``
+    (:class:`~semslam.pipeline.deskew.ScanMotion` over a window holding both stamps; None: no navigation, no priors).
+    Detections more than ``max_age_s`` from ``to_stamp_s``, outside the window or without a finite stamp are left
+    out."""
     from .deskew import sensor_motion_between
 
     if motion is None:
@@ -79,7 +96,7 @@ def predicted_priors(detections: Sequence[Detection], motion: Any, T_vehicle_sen
     out = []
     for d in detections:
         age = float(to_stamp_s) - float(d.stamp_s)
-        if not (0.0 <= age <= max_age_s) or not motion.stamps_s[0] <= d.stamp_s <= motion.stamps_s[-1]:
+        if not abs(age) <= max_age_s or not motion.stamps_s[0] <= d.stamp_s <= motion.stamps_s[-1]:
             continue
         T_now_then = sensor_motion_between(motion, T_vehicle_sensor, float(d.stamp_s), float(to_stamp_s))
         out.append(TrackPrior(str(d.label), T_now_then @ d.T_sensor_object.matrix, int(d.scan_id)))
@@ -94,7 +111,8 @@ def track_rejected(rec: Any, ctx: ScanContext, seg: Any, outcomes: list[ClusterO
     t0 = time.perf_counter()
     outcomes, detections = list(outcomes), list(detections)
     max_shift = rec.config.track_border_cut_m
-    classes = set(rec.db.classes)
+    cut = priors and any(o.touches_border for o in outcomes)  # (else nothing to try)
+    classes = set(rec.db.classes) if cut else set()
     known = [p for p in priors if p.label in classes]
     for k, o in enumerate(outcomes):
         if not o.touches_border or not known or not (o.detection is None or _alone(o, outcomes)):

@@ -5,8 +5,9 @@ Time. Messages come in stamp order (a source's promise; one that comes later tha
 counted and dropped, never applied at the wrong time). The start waits for the first attitude sample and
 ``start_window_s`` of data after it (:mod:`semslam.slam.initial`: depth, fixes, velocity from the dive's own
 data). A scan's detections are stamped by their points, up to a scan's span before the scan message: navigation
-messages wait in a delay line of ``hold_s`` (at least twice the longest scan seen) so that the detections enter the
-filter in stamp order with them. The estimate therefore lags the newest message by ``hold_s``; the live node
+messages wait in a delay line of ``hold_s`` (at least twice the longest scan seen, three times when tracking waits
+for the scan after: :class:`~semslam.run.scan_flow.ScanFlow`) so that the detections enter the filter in stamp order
+with them. The estimate therefore lags the newest message by ``hold_s``; the live node
 publishes the filter's prediction to the newest attitude.
 """
 
@@ -20,16 +21,14 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ..detection import Detection
 from ..errors import InputError
-from ..pipeline.dataset_detection import detect_scan, first_stamp_s, priors_from_scan_before
-from ..pipeline.deskew import NavigationHistory, deskew_lookahead_s, deskews
-from ..pipeline.tracking import tracks
+from ..pipeline.deskew import NavigationHistory
 from ..slam import MODES, SlamConfig, SlamResult
 from ..slam.initial import InitialState, initial_state
 from .sessions import BACKENDS, make_session, with_start
 from .messages import ORDER, Scan
+from .scan_flow import ScanFlow
 
 #: the shortest delay line (s); it grows to twice the longest scan span seen
 MIN_HOLD_S = 2.0
@@ -97,7 +96,6 @@ class Runner:
         if backend not in BACKENDS:
             raise InputError(f"The 'backend' of a run must be one of {BACKENDS}. Got {backend!r} instead.")
         self.vehicle, self.modes, self.recognizer = vehicle, modes, recognizer
-        self._lookahead_s = deskew_lookahead_s(recognizer)  # navigation a scan waits for after its end
         self.given = None if detections_by_scan is None else dict(detections_by_scan)
         self.cfg = SlamConfig() if config is None else config
         self.symmetries, self.backend, self.huber_k, self.survey = symmetries, backend, huber_k, survey
@@ -106,11 +104,6 @@ class Runner:
             raise InputError(f"The 'lookahead' of a run must be an integer from 0 to 64 (scans recognised at once). "
                              f"Got {lookahead!r} instead.")
         self.on_scan, self.lookahead = on_scan, lookahead
-        self._in_flight: list = []  # scans in recognition, in stream order: (first point's stamp, message, future)
-        self._waiting: list = []    # scans to deskew, waiting for the navigation after their end:
-        #                             (message, up, its first point's stamp)
-        self._pool = None
-        self._before = None  # the scan before's detections (or a callable giving them) and first stamp: tracking
         self.sessions: dict = {}
         self.start: InitialState | None = None
         self.detections_by_scan: dict[int, list[Detection]] = {}
@@ -124,6 +117,9 @@ class Runner:
         self._released = -math.inf
         self._hold = MIN_HOLD_S
         self._nav = NavigationHistory(ATTITUDE_MEMORY_S)  # recent attitude and DVL: the scans' up and deskewing
+        self._flow = None if recognizer is None else ScanFlow(
+            recognizer, vehicle, self._nav, self._recognised, self.counts, seed=seed, keep_unreliable=keep_unreliable,
+            up_from_attitude=up_from_attitude, lookahead=lookahead, before_pool=self._limit_blas)
         self._finished = False
         self._blas = None
         if self.given is not None and recognizer is None:  # known in advance: fed at their stamps, scans unused
@@ -150,8 +146,8 @@ class Runner:
         if msg.kind == "scan":
             self._scan(msg)
             return
-        if self._waiting:
-            self._submit_waiting(final=False)
+        if self._flow is not None:
+            self._flow.navigation_came(t)
         self._push(t, msg.kind, msg)
         if self.start is None:
             self._try_start(final=False)
@@ -171,98 +167,20 @@ class Runner:
     # ------------------------------------------------------------------ scans
     def _scan(self, msg: Scan) -> None:
         self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s))
-        if self.recognizer is None:
+        if self._flow is None:
             if self.given is None:
                 self.counts["scans_not_recognised"] += 1
             return
-        from ..pipeline.dataset_detection import up_from_attitude_samples
-
-        up = None
-        if self.up_from_attitude and self._nav.attitude:
-            ts, rpy = self._nav.attitude_arrays()
-            up = up_from_attitude_samples(ts, rpy, self.vehicle.scanner.T_vehicle_scanner,
-                                          0.5 * (msg.start_stamp_s + msg.end_stamp_s))
-        if deskews(self.recognizer, msg.point_stamps_s):  # recognised once the navigation after its end has come
-            self._hold = max(self._hold, 2.0 * (msg.end_stamp_s - msg.start_stamp_s) + self._lookahead_s)
-            self._waiting.append((msg, up, _first_stamp(msg)))
-            self._submit_waiting(final=False)
-            return
-        self._submit(msg, up, None)
-
-    def _submit_waiting(self, final: bool, before_s: float = -math.inf) -> None:
-        """Recognise the scans waiting for navigation: those whose end is ``deskew_lookahead_s`` behind the newest
-        stamp (every navigation sample up to there has come), those starting before ``before_s`` (the filters are
-        about to pass them), or all of them (``final``)."""
-        while self._waiting:
-            msg, up, first_s = self._waiting[0]
-            if not (final or msg.end_stamp_s + self._lookahead_s <= self._newest or first_s <= before_s):
-                return
-            self._waiting.pop(0)
-            self._submit(msg, up, self._scan_motion(msg), first_s)
-
-    def _submit(self, msg: Scan, up, motion, first_s: float | None = None) -> None:
-        first_s = _first_stamp(msg) if first_s is None else first_s
-        kw = dict(scan_id=msg.scan_id, start_stamp_s=msg.start_stamp_s, end_stamp_s=msg.end_stamp_s,
-                  point_stamps_s=msg.point_stamps_s, seed=self.seed, keep_unreliable=self.keep_unreliable,
-                  up_scanner=up, motion=motion, T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner,
-                  priors=self._priors(msg))
-        if self.lookahead:
-            if self._pool is None:
-                from concurrent.futures import ThreadPoolExecutor
-
-                # set before any worker runs: changing OpenBLAS's thread count while another thread is inside
-                # BLAS can crash (and so can restoring it: close() waits for the workers first)
-                self._limit_blas()
-                self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
-            # its detections are stamped by its points: none before the first of them
-            fut = self._pool.submit(_detect_and_trim, self.recognizer, msg.cloud, **kw)
-            self._in_flight.append((first_s, msg, fut))
-            # (the next scan's worker waits for this one's detections: submitted first, it never waits on the next)
-            self._before = (lambda: fut.result()[2].detections, first_s)
-            self._collect(block_over=self.lookahead)
-            return
-        out = detect_scan(self.recognizer, msg.cloud, **kw)
-        self._before = (out[2].detections, first_s)
-        self._recognised(msg, *out)
-
-    def _priors(self, msg: Scan):
-        """The scan before's objects for ``msg``'s tracking (``PipelineConfig.track_border_cut_m``; None: off, or no
-        scan before), carried by the motion between from the navigation held."""
-        if self._before is None or not tracks(self.recognizer):
-            return None
-        dets, first_s = self._before
-        motion = self._nav.motion(self.vehicle.dvl.T_vehicle_dvl.rotation, first_s, msg.end_stamp_s,
-                                  lookahead_s=self._lookahead_s)
-        return priors_from_scan_before(dets, motion, self.vehicle.scanner.T_vehicle_scanner, msg.end_stamp_s)
-
-    def _scan_motion(self, msg: Scan):
-        """The vehicle's motion over a scan from the navigation held (None: no navigation over the scan, counted
-        in ``counts["scans_not_deskewed"]``)."""
-        motion = self._nav.scan_motion(self.vehicle.dvl.T_vehicle_dvl.rotation, msg.point_stamps_s, msg.end_stamp_s,
-                                       lookahead_s=self._lookahead_s)
-        if motion is None:
-            self.counts["scans_not_deskewed"] = self.counts.get("scans_not_deskewed", 0) + 1
-        return motion
+        # (a scan deskewed, or waiting for the scan after it, is final later: the filters stay behind it)
+        self._hold = max(self._hold, self._flow.hold_s(msg))
+        self._flow.add(msg, self._newest)
 
     def _recognised(self, msg: Scan, dets, stats, result) -> None:
-        # a scan's arrays freed: the heap's free pages back to the system (semslam._memory); in the worker thread
-        # itself when recognition runs there (_detect_and_trim)
-        if not self.lookahead:
-            release_free_memory(TRIM_ABOVE_BYTES)
+        """A scan's final detections (:class:`ScanFlow`, in stream order)."""
         self.scans.append(stats)
         if self.on_scan is not None:
             self.on_scan(msg, dets, stats, result)
         self._detections(msg.scan_id, dets)
-
-    def _collect(self, block_over: int, before_s: float = -math.inf) -> None:
-        """Take the recognised scans in stream order: those done, and (waiting for them) those beyond
-        ``block_over`` in flight or starting before ``before_s`` (the filters are about to pass them)."""
-        while self._in_flight:
-            first_s, msg, fut = self._in_flight[0]
-            if not (fut.done() or len(self._in_flight) > block_over or first_s <= before_s):
-                return
-            self._in_flight.pop(0)
-            self._recognised(msg, *fut.result())
 
     def add_scan_detections(self, scan_id: int, detections: list[Detection], stats: dict | None = None) -> None:
         """Detections of a scan recognised elsewhere (the live node's worker thread): fed at their stamps; those
@@ -336,10 +254,8 @@ class Runner:
         limit = math.inf if final else self._newest - self._hold
         if not self._heap or self._heap[0][0] > limit:
             return
-        if self._waiting:  # (never before its navigation has come, with the hold lengthened by the wait)
-            self._submit_waiting(final=final, before_s=limit)
-        if self._in_flight:  # the filters take a scan's detections before passing its start
-            self._collect(block_over=self.lookahead, before_s=limit)
+        if self._flow is not None:  # the filters take a scan's detections before passing its start
+            self._flow.before(limit)
         self._limit_blas()
         while self._heap and self._heap[0][0] <= limit:
             t, _, _, kind, p = heapq.heappop(self._heap)
@@ -351,19 +267,12 @@ class Runner:
         if self._blas is None:  # the filter's matrices are small: BLAS threads only spin on them (6x slower, measured)
             self._blas = threadpool_limits(limits=1, user_api="blas")
 
-    def _stop_workers(self) -> None:
-        """Cancel the scans not yet started and wait for those in recognition (they hold no lock: short)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-        self._in_flight = []
-        self._waiting = []
-
     def close(self) -> None:
         """Stop the recognition threads (waiting for the scans in recognition), then give BLAS its thread count
         back. :meth:`finish` does it; call it when a run is abandoned (an exception, Ctrl-C) so that no worker is
         left inside BLAS while the caller's own limits are restored."""
-        self._stop_workers()
+        if self._flow is not None:
+            self._flow.close()
         if self._blas is not None:
             self._blas.restore_original_limits()
             self._blas = None
@@ -376,12 +285,13 @@ class Runner:
             raise InputError("Runner.finish was already called.")
         self._finished = True
         try:
-            self._submit_waiting(final=True)
-            self._collect(block_over=0)
+            if self._flow is not None:
+                self._flow.finish()
         except BaseException:
             self.close()
             raise
-        self._stop_workers()
+        if self._flow is not None:
+            self._flow.close()
         if self.start is None:
             self._try_start(final=True)
         if self.start is None:
@@ -433,16 +343,3 @@ def run_stream(dive, **runner_kw) -> RunOutcome:
         for r in out.results.values():
             r.metrics["geodetic_origin"] = dive.geodetic_origin.as_dict()
     return out
-
-
-def _detect_and_trim(recognizer, cloud, **kw):
-    """:func:`detect_scan` in a worker thread, then the heap's free pages back to the system (off the thread that
-    reads the dive and runs the filters)."""
-    out = detect_scan(recognizer, cloud, **kw)
-    release_free_memory(TRIM_ABOVE_BYTES)
-    return out
-
-
-def _first_stamp(msg: Scan) -> float:
-    """The stamp of a scan's first point (its start without per-point stamps): no detection of it is older."""
-    return first_stamp_s(msg.point_stamps_s, msg.start_stamp_s)

@@ -56,11 +56,21 @@ def test_a_turning_vehicle_sees_its_prior_turn_the_other_way():
     assert prior.T_sensor_object[:2, :2] == pytest.approx(np.array([[c, -s], [s, c]]), abs=1e-6)
 
 
-def test_no_navigation_or_an_old_or_later_detection_gives_no_prior():
+def test_a_detection_of_the_scan_after_is_carried_back():
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 0.2, 0.5]  # in the sensor frame at 1.5 s
+    (prior,) = predicted_priors([_detection("valve", T, 1.5, scan_id=5)], _straight(0.4), np.eye(4), 1.0)
+    # 0.5 s earlier the vehicle was 0.2 m further back: the object 0.2 m further along x
+    assert prior.T_sensor_object[:3, 3] == pytest.approx([1.2, 0.2, 0.5], abs=1e-9)
+    assert prior.scan_id == 5
+
+
+def test_no_navigation_or_a_detection_too_far_in_time_gives_no_prior():
     T = np.eye(4)
     motion = _straight(0.3)
     assert predicted_priors([_detection("a", T, 0.5)], None, np.eye(4), 1.0) == []
-    assert predicted_priors([_detection("a", T, 1.5)], motion, np.eye(4), 1.0) == []  # after the scan
+    assert predicted_priors([_detection("a", T, 1.9)], motion, np.eye(4), 0.5, max_age_s=1.0) == []  # too late
+    assert predicted_priors([_detection("a", T, 2.5)], motion, np.eye(4), 1.0) == []  # outside the motion
     assert predicted_priors([_detection("a", T, 0.5)], motion, np.eye(4), 1.9, max_age_s=1.0) == []  # too old
     assert predicted_priors([_detection("a", T, float("nan"))], motion, np.eye(4), 1.0) == []
     assert len(predicted_priors([_detection("a", T, 0.5)], motion, np.eye(4), 1.9, max_age_s=1.5)) == 1
@@ -97,22 +107,101 @@ class _TruthRecognizer(ScanRecognizer):
         T = true_T_scanner_object(self.mission, 0, kw["stamp_s"])
         det = Detection(self.mission.objects[0].label, 0.1, T, np.eye(6) * 1e-4, stamp_s=kw["stamp_s"],
                         scan_id=sid)
-        return RecognitionResult([det], [], None, {"total": 0.0})
+        return RecognitionResult([det], [], None, {"total": 0.0}, context=_Context(kw["stamp_s"], sid))
 
 
-def test_the_runner_gives_each_scan_the_scan_befores_objects_where_the_navigation_puts_them():
+class _Context:
+    """What the backward step reads of a scan's context: its stamp (the frame its clusters are in)."""
+
+    def __init__(self, stamp_s: float, scan_id: int) -> None:
+        self.stamp_s, self.scan_id = stamp_s, scan_id
+
+
+def _tracks_every_prior(rec, ctx, seg, outcomes, detections, priors, timings):
+    """A stand-in for the tracking stage: every prior verifies where it is predicted (unreliable, as tracked)."""
+    timings["tracking"] = 1.0
+    new = [Detection(p.label, 0.1, RigidTransform(p.T_sensor_object), np.eye(6) * 1e-4, reliable=False,
+                     stamp_s=ctx.stamp_s, scan_id=ctx.scan_id, extras={"tracked_from_scan": p.scan_id})
+           for p in priors]
+    return outcomes, detections + new
+
+
+def test_every_scan_is_final_with_the_scan_afters_objects_carried_back_the_same_on_every_path(small_dive,
+                                                                                               monkeypatch):
+    """The same dive through the runner (one scan at a time, two at once) and ``detect_dataset``, the tracking stage
+    standing in (every prior verifies): each scan whose scan after follows closely (ends within three of its spans) is
+    made final with the scan after's object carried back to where the navigation puts it at the scan's end (near the
+    truth), the same on every path; the last scan and those before a gap (a turn) have none. Every result handed out is final (no context held); with ``keep_unreliable`` the tracked ones
+    enter the filter, none dropped as late (the runner's hold waits for the scan after)."""
+    from semslam.pipeline import tracking
+    from semslam.pipeline.dataset_detection import detect_dataset
+    from semslam.run import open_dive, run_stream
+    from semslam.simulation.truth import true_T_scanner_object
+
+    monkeypatch.setattr(tracking, "track_rejected", _tracks_every_prior)
+    ds = small_dive
+    back, runs = {}, {}
+
+    def recorder(key):
+        back[key] = {}
+
+        def on_scan(msg, kept, stats, result):
+            sid = msg.scan_id
+            assert result.context is None and stats["n_tracked"] == len(result.detections) - 1
+            back[key][msg.scan_id] = [d for d in result.detections if d.extras.get("tracked_from_scan", -1) > sid]
+        return on_scan
+
+    for lookahead in (0, 2):
+        runs[lookahead] = run_stream(open_dive(ds), modes=("pose",), recognizer=_TruthRecognizer(ds),
+                                     lookahead=lookahead, keep_unreliable=True, on_scan=recorder(lookahead))
+    dataset_back = {}
+    detect_dataset(ds, _TruthRecognizer(ds), keep_unreliable=True, on_scan=lambda rec, cloud, result: dataset_back.
+                   setdefault(rec.scan_id, [d for d in result.detections
+                                            if d.extras.get("tracked_from_scan", -1) > d.scan_id]))
+    scans = ds.scans
+    inner = [a.scan_id for a, b in zip(scans, scans[1:]) if b.end_stamp_s - a.start_stamp_s <= 3 * (a.end_stamp_s -
+                                                                                                      a.start_stamp_s)]
+    alone = sorted(set(back[0]) - set(inner))  # the last scan, and those before a gap in the scans (a turn)
+    assert sorted(back[0]) == sorted(back[2]) == sorted(dataset_back) == [r.scan_id for r in scans]
+    assert len(inner) >= 10 and len(alone) >= 2 and scans[-1].scan_id in alone
+    assert all(back[0][sid] == back[2][sid] == dataset_back[sid] == [] for sid in alone)
+    ends = {r.scan_id: r.end_stamp_s for r in scans}
+    err = []
+    for sid in inner:
+        (d,) = back[0][sid]
+        assert d.extras["tracked_from_scan"] == sid + 1 and not d.reliable
+        (q,) = back[2][sid]
+        assert d.T_sensor_object.matrix.tobytes() == q.T_sensor_object.matrix.tobytes()
+        (r,) = dataset_back[sid]
+        np.testing.assert_allclose(d.T_sensor_object.matrix, r.T_sensor_object.matrix, rtol=0, atol=1e-6)
+        truth = true_T_scanner_object(ds, 0, ends[sid]).matrix
+        err.append(np.linalg.norm(d.T_sensor_object.translation_m - truth[:3, 3]))
+    assert np.median(err) < 0.03  # the navigation's drift over two scans (as forward)
+    for run in runs.values():
+        assert "detections" not in run.counts["late_dropped"]
+        assert sum(len(v) for v in run.detections_by_scan.values()) == 2 * len(inner) + len(alone)
+
+
+@pytest.fixture(scope="module")
+def small_dive():
+    """A one-loop simulated dive of 60 x 60-point scans (seed 3)."""
+    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
+    from semslam.simulation.config import ScannerConfig
+
+    return simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
+                                                      scanner=ScannerConfig(n_lines=60, points_per_line=60)), seed=3)
+
+
+def test_the_runner_gives_each_scan_the_scan_befores_objects_where_the_navigation_puts_them(small_dive):
     """A simulated dive through the runner, one scan at a time and two at once, and through ``detect_dataset``
     (the scans deskewed): every scan but the first gets the scan before's object carried by the dive's attitude and
     DVL, nearer where it truly is at the scan's stamp than where it was (the navigation's drift between two scans),
     the same priors bit for bit with the runner both ways, and to a micrometre from the dataset's logs."""
     from semslam.pipeline.dataset_detection import detect_dataset
     from semslam.run import open_dive, run_stream
-    from semslam.simulation import SimulatorConfig, TrajectoryConfig, simulate_dataset
-    from semslam.simulation.config import ScannerConfig
     from semslam.simulation.truth import true_T_scanner_object
 
-    ds = simulate_dataset(SimulatorConfig().replace(trajectory=TrajectoryConfig(loops=1),
-                                                    scanner=ScannerConfig(n_lines=60, points_per_line=60)), seed=3)
+    ds = small_dive
     seen = {}
     for lookahead in (0, 2):
         rec = _TruthRecognizer(ds)
@@ -193,6 +282,32 @@ def test_a_border_cut_cluster_rejected_alone_is_recognised_at_the_scan_befores_p
         kept, stats, _ = detect_scan(rec, cut, scan_id=24, start_stamp_s=0.0, end_stamp_s=0.0, point_stamps_s=None,
                                      seed=0, keep_unreliable=keep, priors=[prior])
         assert stats["n_tracked"] == 1 and [d.label for d in kept] == (["reducing_socket"] if keep else [])
+
+
+def test_a_border_cut_cluster_rejected_alone_is_recognised_from_the_scan_afters_object(cut_socket):
+    """The half socket as a scan ending at 1.0 s (the object entering the swath), the whole socket seen at 1.5 s
+    in the scan after (2 cm and 3 deg off, the vehicle still): made final with it, the half socket is recognised
+    within 6 mm of the whole view's pose, unreliable, saying whence it came; the output no longer holds the scan's
+    context. With nothing after, or no navigation between, the scan is only made final."""
+    from semslam.pipeline.dataset_detection import detect_scan, track_from_scan_after
+
+    rec, whole, cut, cloud = cut_socket
+    after = _detection(whole.label, _moved(whole.T_sensor_object.matrix, [0.02, 0.0, 0.0], 3.0), 1.5, scan_id=25)
+    for keep in (False, True):
+        out = detect_scan(rec, cut, scan_id=24, start_stamp_s=0.5, end_stamp_s=1.0, point_stamps_s=None, seed=24,
+                          keep_unreliable=keep)
+        assert out[2].detections == [] and out[2].context is not None  # kept: the recogniser tracks
+        assert rec.recognize(cut, seed=24).context is None  # (not kept by a recognition alone)
+        kept, stats, result = track_from_scan_after(rec, out, [after], _straight(0.0), np.eye(4), keep)
+        (tracked,) = result.detections
+        assert tracked.label == whole.label and not tracked.reliable and tracked.extras["tracked_from_scan"] == 25
+        assert np.linalg.norm(tracked.T_sensor_object.translation_m - whole.T_sensor_object.translation_m) < 0.006
+        assert "tracked from scan 25" in next(o.reason for o in result.clusters if o.detection is tracked)
+        assert (stats["n_tracked"], stats["n_detections"], result.context) == (1, 1, None)
+        assert stats["timings_ms"]["tracking"] > 0 and [d.label for d in kept] == ([whole.label] if keep else [])
+        for nothing in (track_from_scan_after(rec, out, [], _straight(0.0), np.eye(4), keep),
+                        track_from_scan_after(rec, out, [after], None, np.eye(4), keep)):
+            assert nothing[2].detections == [] and nothing[2].context is None and nothing[1] == out[1]
 
 
 def test_a_prior_elsewhere_of_another_class_or_already_seen_adds_nothing(cut_socket):

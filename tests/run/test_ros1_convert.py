@@ -470,7 +470,7 @@ class _PriorRecorder:
         self.seen = {}
 
     def recognize(self, cloud, *, seed, stamp_s, scan_id, point_stamps_s=None, up_scanner=None, measured=None,
-                  priors=None):
+                  priors=None, keep_context=False):
         from semslam.detection import Detection
         from semslam.geometry import RigidTransform
         from semslam.pipeline.scan import RecognitionResult
@@ -509,3 +509,56 @@ def test_the_node_tracks_from_the_scan_before_as_semslam_run_does(ros1_bag):
         assert got[0] == want[0] == sid - 1
         np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9)
         assert np.linalg.norm(want[1][:3, 3] - [0.0, 0.0, 3.0]) > 1e-3  # the vehicle moved between the two scans
+
+
+class _ContextRecorder(_PriorRecorder):
+    """``_PriorRecorder`` whose results keep what the backward step reads of a scan's context (its stamp, id)."""
+
+    def recognize(self, cloud, **kw):
+        from dataclasses import replace
+        from types import SimpleNamespace
+
+        context = SimpleNamespace(stamp_s=float(kw["stamp_s"]), scan_id=kw["scan_id"])
+        return replace(super().recognize(cloud, **kw), context=context)
+
+
+def test_the_node_makes_a_scan_final_from_the_scan_after_as_semslam_run_does(ros1_bag, monkeypatch):
+    """The tracking stage standing in (every prior verifies, as in tests/pipeline/test_tracking.py): through the
+    node and through `semslam run`, each scan followed closely by the next gains the next scan's object carried back
+    to the same place (to 1e-9 m); the node publishes such a scan a second time, with it, and counts it."""
+    from semslam.pipeline import tracking
+    from semslam.run import open_dive, run_stream
+    from semslam.run.ros1.decode import LiveDecoder
+    from semslam.run.ros1.live import LiveSlam
+    from tests._support.ros1 import raw_bag_messages
+    from tests.pipeline.test_tracking import _tracks_every_prior
+
+    monkeypatch.setattr(tracking, "track_rejected", _tracks_every_prior)
+    bag, tmap, vehicle = ros1_bag
+
+    def back(result):
+        return [d.T_sensor_object.matrix for d in result.detections if "tracked_from_scan" in d.extras]
+
+    ref = {}
+    run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("dr",), recognizer=_ContextRecorder(),
+               on_scan=lambda msg, kept, stats, result: ref.setdefault(msg.scan_id, back(result)))
+    dec = LiveDecoder(tmap, vehicle)
+    msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
+            in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans])]
+    origin = msgs[0].stamp_ns - msgs[0].stamp_ns % 1_000_000_000
+    published = []
+    live = LiveSlam(vehicle, _ContextRecorder(), mode="pose", scan_queue="all", max_hold_s=1e6,
+                    on_detections=lambda job, result, lat: published.append((job.scan_id, back(result))))
+    for m in msgs:
+        live.add((m.stamp_ns - origin) / 1e9, m.kind, m.payload)
+    live.close()
+    gained = sorted(sid for sid, v in ref.items() if v)
+    assert len(gained) >= 5 and live.stats["tracked_from_scan_after"] == len(gained)
+    last = {}
+    for sid, mats in published:  # a scan published again: the second is final
+        assert sid not in last or (not last[sid] and mats), sid
+        last[sid] = mats
+    assert sorted(last) == sorted(ref) and len(published) == len(ref) + len(gained)
+    for sid in gained:
+        (got,), (want,) = last[sid], ref[sid]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)

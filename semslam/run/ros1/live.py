@@ -19,7 +19,8 @@ Only three things are the node's own:
    scan still in recognition (``stamp - hold_s > scan start``) waits here, at most ``max_hold_s`` of message time,
    then that scan is given up (``scans_late``; its detections are counted late by the runner). With nothing given
    up or dropped, the runner receives what ``semslam run`` gives it: the same estimate. (Tracking,
-   ``track_border_cut_m``, follows objects from the scan the worker recognised before.)
+   ``track_border_cut_m``, follows objects from the scan the worker recognised before; a scan it makes final from
+   the scan after is published again, ``tracked_from_scan_after`` counts what it gained.)
 2. **The low-latency prediction** (:meth:`LiveSlam.predict_to`): the published mode's filter state carried to each
    attitude sample as it arrives, through the attitude samples received since the filter's time.
 
@@ -43,7 +44,7 @@ from ..._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ...errors import SemslamError, SlamError
 from ...pipeline.deskew import deskew_lookahead_s, deskews
 from ..messages import Attitude, Depth, Dvl, Scan
-from .live_deskew import DeskewQueue, tracking_priors
+from .live_deskew import DeskewQueue, recognise_job
 from .live_health import LogTally, live_health
 from .live_prediction import Prediction, carry_forward, session_attitude
 from .timing import FifoSlot, LatestSlot, ReorderBuffer
@@ -121,8 +122,7 @@ class LiveSlam:
             raise SlamError(f"The 'max_hold_s' argument of LiveSlam must be a positive number (s). Got {max_hold_s!r}.")
         if scan_queue not in ("newest", "all"):
             raise SlamError(f"The 'scan_queue' argument of LiveSlam must be 'newest' or 'all'. Got {scan_queue!r}.")
-        # detections_by_scan={}: the scans' detections come from the worker (add_scan_detections), never made
-        # inside the runner
+        # detections_by_scan={}: the scans' detections come from the worker (add_scan_detections), not the runner
         self.runner = Runner(vehicle, modes=modes, recognizer=None, detections_by_scan={}, config=config,
                              symmetries=symmetries, backend=backend, survey=survey, seed=seed,
                              keep_unreliable=keep_unreliable)
@@ -142,13 +142,14 @@ class LiveSlam:
         self._deskew = DeskewQueue(vehicle.dvl.T_vehicle_dvl.rotation,  # scans waiting for the navigation
                                    deskew_lookahead_s(recognizer))
         self._pending: list[ScanJob] = []  # scans waiting for or in recognition, in stamp order
-        self._n_scans, self._before = 0, None  # the worker's scan before: (its detections, first stamp)
+        self._n_scans, self._before = 0, None  # the worker's scan before: (its output, first stamp, job)
         #: when the message last given to the runner was received (``time.monotonic()``): latency statistics
         self.fed_wall_s = math.nan
         self._filter_t = -math.inf
         self.stats: dict[str, Any] = {"messages": {k: 0 for k in _KINDS}, "scans_recognised": 0, "scans_dropped": 0,
                                       "scans_late": 0, "empty_scans": 0, "recognition_errors": 0,
-                                      "navigation_errors": 0, "last_error": "", "scan_latency_s": [], "held_max": 0}
+                                      "navigation_errors": 0, "last_error": "", "scan_latency_s": [], "held_max": 0,
+                                      "tracked_from_scan_after": 0}
         self._closed = self._finished = False
         self.health_tally = LogTally()  # live_health's running tally of the session's log
         self._worker = threading.Thread(target=self._work, name="semslam-recognition", daemon=True)
@@ -327,23 +328,16 @@ class LiveSlam:
 
     # ------------------------------------------------------------------ recognition (worker thread)
     def _work(self) -> None:
-        from ...pipeline.dataset_detection import detect_scan, first_stamp_s
+        from ...pipeline.dataset_detection import first_stamp_s
 
         while True:
             job = self.slot.get()
             if job is None:
                 return
-            sc, err_text = job.scan, ""
+            sc, err_text, before, before_final, added = job.scan, "", self._before, None, False
             try:
-                kept, stats, result = detect_scan(self.recognizer, sc.cloud, scan_id=sc.scan_id,
-                                                  start_stamp_s=sc.start_stamp_s, end_stamp_s=sc.end_stamp_s,
-                                                  point_stamps_s=sc.point_stamps_s, seed=self.seed,
-                                                  keep_unreliable=self.keep_unreliable, up_scanner=job.up_scanner,
-                                                  motion=job.motion,
-                                                  T_vehicle_scanner=self.vehicle.scanner.T_vehicle_scanner,
-                                                  priors=tracking_priors(self.recognizer, job, self._before,
-                                                                         self.vehicle, self._deskew.lookahead_s))
-                self._before = (result.detections, first_stamp_s(sc.point_stamps_s, sc.start_stamp_s))
+                (kept, stats, result), before_final = recognise_job(self, job)
+                self._before = ((kept, stats, result), first_stamp_s(sc.point_stamps_s, sc.start_stamp_s), job)
             except SemslamError as err:  # a scan the pipeline refuses: counted, navigation goes on
                 kept, stats, result, err_text = [], None, None, f"scan {sc.scan_id}: {err}"
             except Exception as err:  # noqa: BLE001 - a bug must not stop the navigation: counted and reported
@@ -366,9 +360,25 @@ class LiveSlam:
                         del self.stats["scan_latency_s"][:500]
                     # a scan given up still enters: the runner counts its detections older than its time as late
                     self.runner.add_scan_detections(sc.scan_id, kept, stats)
+                    added = self._tracked_back(before, before_final)
                 self._advance()
             if result is not None and self.on_detections is not None:  # publishing needs no lock: outside it
                 self.on_detections(job, result, latency)
+                if added:  # the scan before, final with what it gained: published again
+                    self.on_detections(before[2], before_final[2], time.monotonic() - before[2].received_wall_s)
+
+    def _tracked_back(self, before, before_final) -> bool:
+        """The scan before made final from the one just recognised (``before_final``, or None): its new detections
+        counted (``tracked_from_scan_after``), the kept ones fed to the runner (late: counted). Did it gain any?"""
+        if before_final is None:
+            return False
+        old = {id(d) for d in before[0][2].detections}
+        new = [d for d in before_final[2].detections if id(d) not in old]
+        self.stats["tracked_from_scan_after"] += len(new)
+        kept = [d for d in new if any(d is k for k in before_final[0])]
+        if kept:
+            self.runner.add_scan_detections(before[2].scan.scan_id, kept)
+        return bool(new)
 
     # ------------------------------------------------------------------ outputs
     def predict_to(self, t: float) -> "Prediction | None":

@@ -68,15 +68,28 @@ class DeskewQueue:
         return [j for j in out if not j.abandoned]
 
 
-def tracking_priors(recognizer: Any, job: Any, before: Any, vehicle: Any, lookahead_s: float) -> Any:
-    """The scan before's objects for ``job``'s tracking (``PipelineConfig.track_border_cut_m``; None: off, no scan
-    before, or a scan recognised without waiting for its navigation): ``before`` is ``(its detections, its first
-    point's stamp)``, the motion between from the navigation held when the job was ready."""
-    from ...pipeline.dataset_detection import priors_from_scan_before
-    from ...pipeline.tracking import tracks
+def recognise_job(live: Any, job: Any) -> tuple:
+    """The worker's step for ``job`` (:class:`~semslam.run.ros1.live.LiveSlam` ``live``): its scan recognised with
+    the objects of the scan the worker recognised before as priors (``live._before``: its output, first point's
+    stamp and job), and that scan made final from this one's objects when this one follows closely
+    (:mod:`semslam.pipeline.tracking`; the motion between from the navigation held when the job was ready):
+    ``(detect_scan output, the scan before's final output or None)``."""
+    from ...pipeline.dataset_detection import detect_scan, priors_from_scan_before, track_from_scan_after
+    from ...pipeline.tracking import follows_closely, tracks
 
+    sc, before, T_vs = job.scan, live._before, live.vehicle.scanner.T_vehicle_scanner
     nav = getattr(job, "navigation", None)
-    if before is None or nav is None or not tracks(recognizer):
-        return None
-    motion = nav.motion(vehicle.dvl.T_vehicle_dvl.rotation, before[1], job.end_s, lookahead_s=lookahead_s)
-    return priors_from_scan_before(before[0], motion, vehicle.scanner.T_vehicle_scanner, job.end_s)
+    motion = None
+    if before is not None and nav is not None and tracks(live.recognizer):
+        motion = nav.motion(live.vehicle.dvl.T_vehicle_dvl.rotation, before[1], job.end_s,
+                            lookahead_s=live._deskew.lookahead_s)
+    priors = None if motion is None else priors_from_scan_before(before[0][2].detections, motion, T_vs, job.end_s)
+    out = detect_scan(live.recognizer, sc.cloud, scan_id=sc.scan_id, start_stamp_s=sc.start_stamp_s,
+                      end_stamp_s=sc.end_stamp_s, point_stamps_s=sc.point_stamps_s, seed=live.seed,
+                      keep_unreliable=live.keep_unreliable, up_scanner=job.up_scanner, motion=job.motion,
+                      T_vehicle_scanner=T_vs, priors=priors)
+    bsc = None if motion is None else before[2].scan
+    if bsc is None or not follows_closely(before[1], bsc.start_stamp_s, bsc.end_stamp_s, sc.end_stamp_s):
+        return out, None
+    return out, track_from_scan_after(live.recognizer, before[0], out[2].detections, motion, T_vs,
+                                      live.keep_unreliable)

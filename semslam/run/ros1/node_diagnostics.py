@@ -38,6 +38,7 @@ def node_diagnostics(node) -> tuple[int, str, dict]:
           "scans_recognised": st["scans_recognised"],
           "scans_dropped": st["scans_dropped"] + node.scans_dropped_inbox,
           "scans_late": st["scans_late"], "detections_late": late.get("detections", 0),
+          "tracked_from_scan_after": st["tracked_from_scan_after"],
           "recognition_errors": st["recognition_errors"], "navigation_errors": st["navigation_errors"],
           "scan_latency_p50_ms": 1e3 * p50, "scan_latency_p90_ms": 1e3 * p90,
           "navigation_latency_p50_ms": 1e3 * n50, "navigation_latency_p90_ms": 1e3 * n90,
