@@ -283,7 +283,7 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
                                 surroundings_scanner=surroundings(seg, points, model.radius_m)
                                 if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model),
                                 scene_scanner=_scene_of(seg, points) if cfg.pose_border_scene and hyp.touches_border
-                                else None)
+                                else None, init_T_scanner_object=hyp.init_T_sensor_object)
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

@@ -6,9 +6,9 @@ neighbour it looks like (a cross cut to a tee fits the tee at fitness 1.000). Bu
 sweeps the scene a fraction of its swath per scan, so an object leaving the swath was usually recognised whole in the
 scan before. Its pose there, carried into this scan by the vehicle's own motion between the two (attitude + DVL,
 :mod:`semslam.pipeline.deskew`; never the filter's estimate, never ground truth), is a prior: the rejected cluster
-that lies where the object is predicted is aligned to the class's model by ICP from the predicted pose, and kept
-when the pose passes the same verification as any other (fitness, floor, visibility) and moved no more than
-``track_border_cut_m`` from the prediction. Its detection keeps the border's flag (unreliable: by default it does not
+that lies where the object is predicted is aligned to the class's model by ICP from the predicted pose (by the
+class's pose search when that fails), and kept when the pose passes the same verification as any other (fitness,
+floor, visibility) and moved no more than ``track_border_cut_m`` from the prediction. Its detection keeps the border's flag (unreliable: by default it does not
 enter the filter) and says whence it came (``extras["tracked_from_scan"]``; the reason "tracked from scan k").
 A border-cut cluster recognised alone as another class than the object predicted there is tried the same way: when
 the predicted object's pose verifies too, the scan before's view (the whole object) decides what it is.
@@ -171,13 +171,27 @@ def _candidates(rec: Any, priors: Sequence[TrackPrior], centroid: np.ndarray, de
 
 def _tracked(rec: Any, ctx: ScanContext, seg: Any, o: ClusterOutcome, prior: TrackPrior, desc: Any,
              max_shift_m: float, timings: dict) -> tuple[Detection | None, str]:
-    """The detection of cluster ``o`` (its descriptors ``desc``) as ``prior``'s object, ICP from the prediction, or
-    None and why not."""
+    """The detection of cluster ``o`` (its descriptors ``desc``) as ``prior``'s object, or None and why not: ICP from
+    the prediction first (``extras["track_pose"] = "prediction"``), then, when that pose fails, the class's pose
+    search (``"search"``: ICP's basin on a cut view can be narrower than the navigation's error between two scans,
+    a half socket's under 2 cm)."""
+    why = ""
+    for init in (prior.T_sensor_object, None):
+        det, why = _tracked_from(rec, ctx, seg, o, prior, desc, max_shift_m, timings, init)
+        if det is not None:
+            det.extras["track_pose"] = "search" if init is None else "prediction"
+            return det, ""
+    return None, why
+
+
+def _tracked_from(rec: Any, ctx: ScanContext, seg: Any, o: ClusterOutcome, prior: TrackPrior, desc: Any,
+                  max_shift_m: float, timings: dict, init: np.ndarray | None) -> tuple[Detection | None, str]:
+    """:func:`_tracked` from ``init`` (ICP from it; None: the pose search)."""
     cluster = seg.clusters[o.cluster_index]
     seed = ctx.cluster_seed + o.cluster_index
     match = rec.recognizer.class_match(desc, prior.label)
     hyp = Hypothesis(_input_indices(seg, o.cluster_index), cluster, prior.label, match.view_index, match,
-                     touches_border=True, init_T_sensor_object=prior.T_sensor_object)
+                     touches_border=True, init_T_sensor_object=init)
     try:
         det = pose_hypothesis(rec, ctx, seg, hyp, seed=seed, timings=timings)
     except RegistrationError as exc:
