@@ -280,6 +280,8 @@ def test_a_border_cut_cluster_rejected_alone_is_recognised_at_the_scan_befores_p
         assert tracked.extras["tracked_from_scan"] == 23 and "tracked from scan 23" in o.reason
         assert np.linalg.norm(tracked.T_sensor_object.translation_m - whole.T_sensor_object.translation_m) < 0.006
         assert result.timings_ms["tracking"] > 0
+        # the position as uncertain as the prediction it was held to: at least 3 cm per axis
+        assert np.linalg.eigvalsh(tracked.covariance_6x6[:3, :3]).min() >= 0.03 ** 2
     # through a runner's step: counted; the filter takes it only with keep_unreliable (it is border-cut)
     for keep in (False, True):
         kept, stats, _ = detect_scan(rec, cut, scan_id=24, start_stamp_s=0.0, end_stamp_s=0.0, point_stamps_s=None,
