@@ -173,8 +173,9 @@ PRESETS: dict[str, dict] = {
     # upright search scores 256 of its 1296 orientations per up fully (a gate valve's right orientation ranked past
     # 96 by the fit of 48 points).
     # A border-cut cluster rejected alone, or taken alone for another class, is tried as the object the scan before
-    # saw there (semslam.pipeline.tracking; 3 cm from the prediction at most; session 30: catalogue seed 0 recall
-    # 92.4 -> 95.0 %, real models seeds 0 and 3 95.1 -> 96.1 and 89.1 -> 90.6 %, precision unchanged or better).
+    # or after saw there, ICP from the prediction (semslam.pipeline.tracking; 3 cm from it at most; sessions 30-31:
+    # catalogue seed 0 recall 92.4 -> 98.3 %, real models seeds 0 and 3 95.1 -> 98.1 and 89.1 -> 95.3 %, precision
+    # unchanged or better).
     # Chosen on benchmarks/real_models.py seed 0 (RESULTS.md "Real data"); use a laser database (db build --vehicle)
     "seabed": {"pipeline": {"verify_min_fitness": 0.95, "verify_max_visibility": 0.15, "border": "flag",
                             "size_reference": "principal",
