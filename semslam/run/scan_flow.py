@@ -135,8 +135,8 @@ class ScanFlow:
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
 
-            if self.before_pool is not None:
-                self.before_pool()
+            if self.before_pool is not None:  # (the runner limits BLAS's threads before any worker runs: changing
+                self.before_pool()                # OpenBLAS's thread count while a thread is inside BLAS can crash)
             self._pool = ThreadPoolExecutor(self.lookahead, thread_name_prefix="semslam-recognition")
         fut = self._pool.submit(_detect_and_trim, self.recognizer, msg.cloud, back, **kw)
         self.in_flight.append((first_s, msg, fut))
