@@ -16,7 +16,8 @@ DIR`` makes them; without them the script stops and says so)::
 The cold table ends with the floor under any such command: a fresh Python that imports numpy, scipy.spatial and
 numba and calls one cached numba kernel (numba's first call sets up its compiler and typing registries). The
 children run with Python's bytecode cache on, as an installed package has it (``--no-bytecode`` keeps the parent's
-``PYTHONDONTWRITEBYTECODE``: every run then compiles semslam's sources again).
+``PYTHONDONTWRITEBYTECODE``: every run then compiles semslam's sources again). Last, the numba kernels of one cold
+run of the first ``--cold-scans`` scan: each one's first call (loaded from numba's cache) and the bytes it read.
 
 Every figure is printed with the machine's load average (``os.getloadavg``): the latencies are only
 comparable at a similar load.
@@ -113,6 +114,7 @@ def cold(args) -> None:
         for which in args.cold_db:
             _cold_table(args, run, _cold_database(which, run, Path(tmp), base_env), base_env)
     _floor(args.cold_repeat, base_env)
+    _kernel_loads(run, args.cold_scans[0], base_env)
 
 
 def _cold_database(which: str, run: Path, tmp: Path, env: dict) -> Path:
@@ -203,6 +205,47 @@ def _floor(repeat: int, env: dict) -> None:
             cpus.append(_children_cpu_s() - cpu0)
     print(f"| floor: `import numpy, scipy.spatial, numba` + one cached kernel | - | {load0} | "
           f"{min(walls):.2f} / {np.median(walls):.2f} | {min(cpus):.2f} / {np.median(cpus):.2f} | - | - |")
+
+
+_KERNEL_LOADS = """
+import contextlib, io, json, os, sys, threading, time
+from numba.core import caching, dispatcher
+first, read = dispatcher._DispatcherBase._compile_for_args, caching.IndexDataCacheFile._load_data
+loads, mine = [], threading.local()  # (the descriptors' kernels load in two threads at once)
+def timed(self, *a, **k):
+    t0, mine.read = time.perf_counter(), 0
+    try:
+        return first(self, *a, **k)
+    finally:
+        loads.append(((time.perf_counter() - t0) * 1e3, self.py_func.__module__, self.py_func.__name__, mine.read))
+def sized(self, name):
+    mine.read += os.path.getsize(self._data_path(name))
+    return read(self, name)
+dispatcher._DispatcherBase._compile_for_args = timed
+caching.IndexDataCacheFile._load_data = sized
+from semslam.cli.main import main
+with contextlib.redirect_stdout(io.StringIO()):
+    rc = main(sys.argv[1:])
+print(json.dumps({"rc": rc, "loads": loads}))
+"""
+
+
+def _kernel_loads(run: Path, sid: int, env: dict, top: int = 10) -> None:
+    """What a cold ``semslam recognize`` spends in numba: each kernel's first call (its machine code loaded
+    from numba's on-disk cache; the first call also sets numba up: the floor's kernel pays that too) in one fresh
+    process, with the size of the cache file it read. The load time follows the size: numba's own code that a
+    kernel uses (``np.linalg.solve``, sorting, the shape-error messages of array expressions) is compiled into
+    it. The descriptors' kernels load in two threads at once: their times overlap."""
+    scan = run / "mission" / "scans" / f"scan_{sid:05d}.pcd"
+    cmd = [sys.executable, "-c", _KERNEL_LOADS, "recognize", str(scan), "--db", str(run / "db.npz"), "--json"]
+    subprocess.run(cmd, check=True, capture_output=True, env=env)  # the cache filled
+    load0 = _load()
+    loads = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True, env=env).stdout)["loads"]
+    print(f"\n## Numba kernels of one cold `semslam recognize` (scan {sid}, the run's db.npz; {load0})\n")
+    print("| kernel | first call ms | cache file read kB |\n|---|---:|---:|")
+    for ms, module, name, size in sorted(loads, key=lambda r: -r[0])[:top]:
+        print(f"| `{module.removeprefix('semslam.')}.{name}` | {ms:.1f} | {size / 1e3:.0f} |")
+    print(f"| all {len(loads)} kernels | {sum(r[0] for r in loads):.0f} | {sum(r[3] for r in loads) / 1e3:.0f} |")
 
 
 def _child_env(no_bytecode: bool) -> dict:

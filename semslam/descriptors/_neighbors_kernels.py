@@ -15,6 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ..segmentation._voxel_kernels import radix_argsort  # a stable sort without numba's mergesort code
+
 #: Dense cell table when the bounding grid has at most this many cells per point (+ a constant).
 DENSE_CELLS_PER_POINT = 8
 DENSE_CELLS_MIN = 1 << 16
@@ -72,7 +74,7 @@ def _bucket(points, origin, cell_m):  # pragma: no cover - compiled
             fill[keys[i]] += 1
     else:
         start = np.zeros(0, dtype=np.int64)
-        order = np.argsort(keys, kind="mergesort")
+        order = radix_argsort(keys, n_cells - 1)[0]  # stable, as np.argsort(kind="stable")
     skeys = np.empty(n, dtype=np.int64)
     spts = np.empty((n, 3))
     scells = np.empty((n, 3), dtype=np.int64)
@@ -99,21 +101,41 @@ def _compressed_cells(points, origin, cell_m, cells, dims):  # pragma: no cover 
             big = max(big, abs(points[i, a]) / cell_m)
     shift = np.zeros(3) if big < MAX_ABS_CELLS else origin  # relative cells: the caller checks the span
     total = 1.0
+    raw = np.empty(n, dtype=np.int64)
     for a in range(3):
-        raw = np.empty(n, dtype=np.int64)
+        lowest = 0
+        highest = 0
         for i in range(n):
             raw[i] = math.floor((points[i, a] - shift[a]) / cell_m)
-        uniq = np.unique(raw)
-        comp = np.zeros(uniq.shape[0], dtype=np.int64)
-        for u in range(1, uniq.shape[0]):
-            comp[u] = comp[u - 1] + (1 if uniq[u] - uniq[u - 1] == 1 else 2)
-        pos = np.searchsorted(uniq, raw)
+            lowest = raw[i] if i == 0 else min(lowest, raw[i])
+            highest = raw[i] if i == 0 else max(highest, raw[i])
         for i in range(n):
-            cells[i, a] = comp[pos[i]]
-        dims[a] = comp[-1] + 1 if n else 1
+            raw[i] -= lowest  # < 2**53 (MAX_ABS_CELLS): no overflow
+        order, sorted_raw = radix_argsort(raw, highest - lowest)
+        comp = 0  # the occupied coordinates in order, renumbered
+        for s in range(n):
+            if s > 0 and sorted_raw[s] != sorted_raw[s - 1]:
+                comp += 1 if sorted_raw[s] - sorted_raw[s - 1] == 1 else 2
+            cells[order[s], a] = comp
+        dims[a] = comp + 1
         total *= float(dims[a])
     if total >= 4.0e18:
         raise ValueError("too many occupied grid cells for 64-bit cell keys")
+
+
+@njit(cache=True, inline="always")
+def _first_at_least(sorted_keys, key):  # pragma: no cover - compiled
+    """First position of ``sorted_keys`` (ascending) whose key is >= ``key`` (``np.searchsorted`` side "left",
+    written out: numba's brings ~100 kB of code into every kernel a cold process loads)."""
+    lo = 0
+    hi = sorted_keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if sorted_keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @njit(cache=True, inline="always")
@@ -136,8 +158,8 @@ def _block(s0, skeys, scells, start, dims, lo, hi):  # pragma: no cover - compil
                 a = start[base + zlo]
                 b = start[base + zhi + 1]
             else:
-                a = np.searchsorted(skeys, base + zlo)
-                b = np.searchsorted(skeys, base + zhi, side="right")
+                a = _first_at_least(skeys, base + zlo)
+                b = _first_at_least(skeys, base + zhi + 1)
             if b > a:
                 lo[n_cols] = a
                 hi[n_cols] = b

@@ -168,7 +168,8 @@ def visibility_cost(Rs, ts, model_pts, model_nrm, viewpoint, F, u0, v0, inv_cell
     H, M = Rs.shape[0], model_pts.shape[0]
     nu, nv = range_min.shape[0], range_min.shape[1]
     out = np.empty(H)
-    no_camera = np.zeros(M if np.isnan(camera).any() else 0, dtype=np.bool_)  # then hidden nowhere (read only)
+    # no camera: hidden nowhere (read only)
+    no_camera = np.zeros(M if np.isnan(camera[0]) or np.isnan(camera[1]) or np.isnan(camera[2]) else 0, np.bool_)
     for h in prange(H):
         R = Rs[h]
         c0 = ts[h, 0] + R[0, 0] * viewpoint[0] + R[0, 1] * viewpoint[1] + R[0, 2] * viewpoint[2]
@@ -240,9 +241,18 @@ def _camera_hidden(R, t, model_pts, model_nrm, camera, cell_rad, tol_m, no_camer
     k0 = t[0] + R[0, 0] * camera[0] + R[0, 1] * camera[1] + R[0, 2] * camera[2]  # the camera in the object frame
     k1 = t[1] + R[1, 0] * camera[0] + R[1, 1] * camera[1] + R[1, 2] * camera[2]
     k2 = t[2] + R[2, 0] * camera[0] + R[2, 1] * camera[1] + R[2, 2] * camera[2]
-    centre = np.array([model_pts[:, 0].mean(), model_pts[:, 1].mean(), model_pts[:, 2].mean()])
-    r2 = ((model_pts - centre) ** 2).sum(axis=1).max()  # the model's bounding sphere about its centroid
-    z0, z1, z2 = centre[0] - k0, centre[1] - k1, centre[2] - k2
+    # the model's bounding sphere about its centroid, in loops (array expressions bring numba's shape-error and
+    # reduction code, ~200 kB that a cold process loads from the cache)
+    e0 = e1 = e2 = 0.0
+    for m in range(M):
+        e0 += model_pts[m, 0]
+        e1 += model_pts[m, 1]
+        e2 += model_pts[m, 2]
+    e0, e1, e2 = e0 / M, e1 / M, e2 / M
+    r2 = 0.0
+    for m in range(M):
+        r2 = max(r2, (model_pts[m, 0] - e0) ** 2 + (model_pts[m, 1] - e1) ** 2 + (model_pts[m, 2] - e2) ** 2)
+    z0, z1, z2 = e0 - k0, e1 - k1, e2 - k2
     d2 = z0 * z0 + z1 * z1 + z2 * z2
     if d2 <= 1.0001 * r2 or cell_rad <= 0.0:  # the camera inside the model's sphere: no image of it
         return hidden

@@ -184,11 +184,7 @@ def icp_plane_field(src, T0, params, index, model_pts, model_nrm, max_corr, max_
         e = _plane_normal_equations(src, T, model_pts, model_nrm, pair, H, g, J)
         success = False
         for _ in range(10):
-            A[:] = H
-            for u in range(6):
-                A[u, u] += lam
-            if not _solve_spd6(A, g, delta):  # not numerically positive definite: LU
-                delta[:] = -np.linalg.solve(A, g)
+            _damped_step(H, g, lam, A, delta)
             _exp_se3_into(delta, E)
             _matmul44(T, E, T_new)
             if _plane_error(src, T_new, model_pts, model_nrm, pair) < e:
@@ -218,7 +214,9 @@ def icp_plane_field_batch(src, T0s, params, index, model_pts, model_nrm, max_cor
     for h in prange(H):
         T, it, c, n = icp_plane_field(src, T0s[h], params, index, model_pts, model_nrm, max_corr, max_iterations,
                                       rot_eps, trans_eps)
-        Ts[h] = T
+        for a in range(4):  # element-wise: a slice assignment would bring numba's shape-error code
+            for b in range(4):
+                Ts[h, a, b] = T[a, b]
         its[h] = it
         conv[h] = c
         n_pairs[h] = n
@@ -253,6 +251,62 @@ def _solve_spd6(A, g, out):
             v -= A[k, i] * out[k]
         out[i] = v / A[i, i]
     return True
+
+
+@njit(cache=True, nogil=True)
+def _damped_step(H, g, lam, A, delta):
+    """The Levenberg-Marquardt step ``delta = -(H + lam I)^-1 g`` (6x6; ``A`` scratch): Cholesky, LU when the
+    damped system is not numerically positive definite (on ``H + lam I`` again: the failed Cholesky overwrote
+    ``A``). Element by element, see :func:`_solve_lu6` on code size."""
+    for u in range(6):
+        for v in range(6):
+            A[u, v] = H[u, v]
+        A[u, u] += lam
+    if not _solve_spd6(A, g, delta):
+        for u in range(6):
+            for v in range(6):
+                A[u, v] = H[u, v]
+            A[u, u] += lam
+        _solve_lu6(A, g, delta)
+
+
+@njit(cache=True, nogil=True)
+def _solve_lu6(A, g, out):
+    """``out = -A^-1 g`` for a 6x6 ``A`` by LU with partial pivoting (LAPACK's ``getrf``/``getrs`` order;
+    ``A`` overwritten). A zero pivot (a singular system) gives a zero step, which the damping then grows past.
+    Written out rather than ``np.linalg.solve``: that brings ~200 kB of code into every kernel calling this,
+    which a cold process loads from numba's cache (issue #29's cold-start budget)."""
+    piv = np.empty(6, np.int64)
+    for i in range(6):
+        out[i] = -g[i]
+    for j in range(6):
+        p = j
+        for i in range(j + 1, 6):
+            if abs(A[i, j]) > abs(A[p, j]):
+                p = i
+        if A[p, j] == 0.0:
+            for i in range(6):
+                out[i] = 0.0
+            return
+        piv[j] = p
+        if p != j:
+            for k in range(6):
+                A[j, k], A[p, k] = A[p, k], A[j, k]
+        for i in range(j + 1, 6):
+            A[i, j] /= A[j, j]
+            for k in range(j + 1, 6):
+                A[i, k] -= A[i, j] * A[j, k]
+    for j in range(6):  # the rows of the right-hand side swapped as A's, in order
+        p = piv[j]
+        if p != j:
+            out[j], out[p] = out[p], out[j]
+    for i in range(6):  # L y = b (unit diagonal)
+        for k in range(i):
+            out[i] -= A[i, k] * out[k]
+    for i in range(5, -1, -1):  # U x = y
+        for k in range(i + 1, 6):
+            out[i] -= A[i, k] * out[k]
+        out[i] /= A[i, i]
 
 
 @njit(cache=True, nogil=True)

@@ -315,3 +315,49 @@ def test_icp_step_helpers_match_numpy():
         _matmul44(E, E, out)
         np.testing.assert_allclose(out, E @ E, rtol=0, atol=1e-14)
     assert not _solve_spd6(np.zeros((6, 6)), np.ones(6), np.empty(6))  # singular: the caller falls back to LU
+
+
+def test_icp_lu_fallback_matches_numpy_and_gives_a_zero_step_when_singular():
+    """The LU solve icp_plane_field falls back to when the damped system is not numerically positive definite
+    (written out: numba's np.linalg.solve brought ~200 kB of code into the cold start): np.linalg.solve on general,
+    indefinite and ill-conditioned 6x6 systems, pivoting included; a zero step for a singular one (np.linalg.solve
+    raised inside the kernel)."""
+    from semslam.registration._icp_kernels import _solve_lu6
+
+    rng = np.random.default_rng(5)
+    for k in range(300):
+        A = rng.normal(size=(6, 6))
+        if k % 3 == 1:  # symmetric indefinite, as a damped Hessian that rounding made non-positive
+            A = A + A.T
+        elif k % 3 == 2:  # a zero leading pivot: row exchanges needed from the first column
+            A[0, 0] = 0.0
+        g = rng.normal(size=6)
+        x = np.full(6, np.nan)
+        _solve_lu6(A.copy(), g, x)
+        want = -np.linalg.solve(A, g)
+        np.testing.assert_allclose(x, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    singular = rng.normal(size=(6, 6))
+    singular[:, 3] = 0.0
+    x = np.full(6, np.nan)
+    _solve_lu6(singular, np.ones(6), x)
+    assert np.array_equal(x, np.zeros(6))
+
+
+def test_icp_step_falls_back_to_lu_on_the_damped_system_not_on_a_half_factored_one():
+    """The Levenberg-Marquardt step of icp_plane_field: -(H + lambda I)^-1 g whether the damped system is
+    positive definite (Cholesky) or not (a rank-deficient Hessian whose rounding beat the damping: LU). The LU
+    fallback solved the matrix the failed Cholesky had half overwritten, or raised inside the kernel."""
+    from semslam.registration._icp_kernels import _damped_step
+
+    rng = np.random.default_rng(8)
+    Q = np.linalg.qr(rng.normal(size=(6, 6)))[0]
+    for eigenvalues in ([5.0, 3.0, 1.0, 0.5, 0.2, 0.1], [5.0, 3.0, 1.0, 0.5, 0.2, -1e-3]):
+        H = Q @ np.diag(eigenvalues) @ Q.T
+        H = 0.5 * (H + H.T)
+        g = rng.normal(size=6)
+        lam = 1e-4
+        A = np.empty((6, 6))
+        delta = np.full(6, np.nan)
+        _damped_step(H, g, lam, A, delta)
+        want = -np.linalg.solve(H + lam * np.eye(6), g)
+        np.testing.assert_allclose(delta, want, rtol=0, atol=1e-9 * np.abs(want).max())
