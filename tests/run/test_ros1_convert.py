@@ -562,3 +562,44 @@ def test_the_node_makes_a_scan_final_from_the_scan_after_as_semslam_run_does(ros
     for sid in gained:
         (got,), (want,) = last[sid], ref[sid]
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_the_node_publishes_a_scan_before_tracking_back_into_the_scan_before(ros1_bag, monkeypatch):
+    """The backward step (the scan before made final from a scan's objects, up to a few hundred ms) runs after the
+    scan is published, not before: when it runs for scan k, scan k + 1 is out. The filter still waits for what it
+    gains: with ``keep_unreliable`` the tracked detections enter it, none late, and the node's odometry is
+    `semslam run`'s (to 1e-9 m)."""
+    from semslam.pipeline import tracking
+    from semslam.run import open_dive, run_stream
+    from semslam.run.ros1.decode import LiveDecoder
+    from semslam.run.ros1.live import LiveSlam
+    from tests._support.ros1 import raw_bag_messages
+    from tests.pipeline.test_tracking import _tracks_every_prior
+
+    published, backward = [], []
+
+    def tracked_back(rec, ctx, *args):
+        backward.append((ctx.scan_id, list(published)))
+        return _tracks_every_prior(rec, ctx, *args)
+
+    monkeypatch.setattr(tracking, "track_rejected", tracked_back)
+    bag, tmap, vehicle = ros1_bag
+    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("pose",), recognizer=_ContextRecorder(),
+                     keep_unreliable=True)
+    backward.clear()
+    dec = LiveDecoder(tmap, vehicle)
+    msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
+            in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans])]
+    origin = msgs[0].stamp_ns - msgs[0].stamp_ns % 1_000_000_000
+    live = LiveSlam(vehicle, _ContextRecorder(), mode="pose", scan_queue="all", max_hold_s=1e6, keep_unreliable=True,
+                    on_detections=lambda job, result, lat: published.append(job.scan_id))
+    for m in msgs:
+        live.add((m.stamp_ns - origin) / 1e9, m.kind, m.payload)
+    out = live.close()
+    assert len(backward) >= 5
+    for scan_id, out_then in backward:
+        assert scan_id + 1 in out_then, (scan_id, out_then)
+    assert live.stats["tracked_from_scan_after"] >= 5
+    assert out.counts["late_dropped"] == {} == ref.counts["late_dropped"]
+    np.testing.assert_allclose(out.results["pose"].position_ned_m, ref.results["pose"].position_ned_m,
+                               rtol=0, atol=1e-9)

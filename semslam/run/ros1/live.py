@@ -16,11 +16,13 @@ Only three things are the node's own:
    through a keep-newest slot of size one (a scan waiting when a newer one comes is dropped, counted); its
    detections enter through :meth:`Runner.add_scan_detections`. The runner's delay line is in message time,
    recognition takes wall time: a navigation message whose feeding would release the filter past the start of a
-   scan still in recognition (``stamp - hold_s > scan start``) waits here, at most ``max_hold_s`` of message time,
+   scan still in recognition (``stamp - hold_s > scan start``; tracking: past the first stamp of the scan before
+   it, which may gain from it) waits here, at most ``max_hold_s`` of message time,
    then that scan is given up (``scans_late``; its detections are counted late by the runner). With nothing given
    up or dropped, the runner receives what ``semslam run`` gives it: the same estimate. (Tracking,
    ``track_border_cut_m``, follows objects from the scan the worker recognised before; a scan it makes final from
-   the scan after is published again, ``tracked_from_scan_after`` counts what it gained.)
+   the scan after is published again once the scan after is out, the filter waiting for it;
+   ``tracked_from_scan_after`` counts what it gained.)
 2. **The low-latency prediction** (:meth:`LiveSlam.predict_to`): the published mode's filter state carried to each
    attitude sample as it arrives, through the attitude samples received since the filter's time.
 
@@ -35,7 +37,6 @@ import bisect
 import math
 import threading
 import time
-from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
@@ -44,7 +45,7 @@ from ..._memory import TRIM_ABOVE_BYTES, release_free_memory
 from ...errors import SemslamError, SlamError
 from ...pipeline.deskew import deskew_lookahead_s, deskews
 from ..messages import Attitude, Depth, Dvl, Scan
-from .live_deskew import DeskewQueue, recognise_job
+from .live_deskew import DeskewQueue, ScanJob, recognise_job, tracked_back
 from .live_health import LogTally, live_health
 from .live_prediction import Prediction, carry_forward, session_attitude
 from .timing import FifoSlot, LatestSlot, ReorderBuffer
@@ -52,31 +53,6 @@ from .timing import FifoSlot, LatestSlot, ReorderBuffer
 __all__ = ["LiveSlam", "Prediction", "ScanJob", "live_health"]
 
 _KINDS = ("attitude", "dvl", "depth", "fix", "scan")
-
-
-@dataclass
-class ScanJob:
-    """A scan waiting for, or in, recognition."""
-
-    scan: Scan
-    received_wall_s: float
-    up_scanner: Any = None
-    abandoned: bool = False
-    motion: Any = None
-    navigation: Any = None  # the navigation held when it was ready (tracking from the scan before)
-    meta: dict = field(default_factory=dict)
-
-    @property
-    def scan_id(self) -> int:
-        return self.scan.scan_id
-
-    @property
-    def start_s(self) -> float:
-        return self.scan.start_stamp_s
-
-    @property
-    def end_s(self) -> float:
-        return self.scan.end_stamp_s
 
 
 class LiveSlam:
@@ -143,6 +119,8 @@ class LiveSlam:
                                    deskew_lookahead_s(recognizer))
         self._pending: list[ScanJob] = []  # scans waiting for or in recognition, in stamp order
         self._n_scans, self._before = 0, None  # the worker's scan before: (its output, first stamp, job)
+        # tracking (_advance): first stamps of the scan the worker recognised last and of the one it makes final
+        self._last_first_s = self._tracking_back = math.inf
         #: when the message last given to the runner was received (``time.monotonic()``): latency statistics
         self.fed_wall_s = math.nan
         self._filter_t = -math.inf
@@ -301,7 +279,10 @@ class LiveSlam:
             job.abandoned = True
             self.stats["scans_late"] += 1
         self.stats["held_max"] = max(self.stats["held_max"], len(self._held))
-        boundary = self._pending[0].start_s if self._pending else math.inf
+        # and, tracking, behind the first stamp of the scan recognised before it (which may gain from it), and of
+        # the scan the worker is making final
+        boundary = min(self._pending[0].start_s, self._last_first_s) if self._pending else math.inf
+        boundary = min(boundary, self._tracking_back)
         n = 0
         while n < len(self._held) and self._held[n][0].stamp_s - hold <= boundary:
             n += 1
@@ -329,14 +310,15 @@ class LiveSlam:
     # ------------------------------------------------------------------ recognition (worker thread)
     def _work(self) -> None:
         from ...pipeline.dataset_detection import first_stamp_s
+        from ...pipeline.tracking import tracks
 
         while True:
             job = self.slot.get()
             if job is None:
                 return
-            sc, err_text, before, before_final, added = job.scan, "", self._before, None, False
+            sc, err_text, before, back = job.scan, "", self._before, None
             try:
-                (kept, stats, result), before_final = recognise_job(self, job)
+                (kept, stats, result), back = recognise_job(self, job)
                 self._before = ((kept, stats, result), first_stamp_s(sc.point_stamps_s, sc.start_stamp_s), job)
             except SemslamError as err:  # a scan the pipeline refuses: counted, navigation goes on
                 kept, stats, result, err_text = [], None, None, f"scan {sc.scan_id}: {err}"
@@ -360,25 +342,37 @@ class LiveSlam:
                         del self.stats["scan_latency_s"][:500]
                     # a scan given up still enters: the runner counts its detections older than its time as late
                     self.runner.add_scan_detections(sc.scan_id, kept, stats)
-                    added = self._tracked_back(before, before_final)
+                    if back is not None:  # the filter waits for what the scan before gains (its first stamp)
+                        self._tracking_back = before[1]
+                    if tracks(self.recognizer):
+                        self._last_first_s = self._before[1]
                 self._advance()
             if result is not None and self.on_detections is not None:  # publishing needs no lock: outside it
                 self.on_detections(job, result, latency)
-                if added:  # the scan before, final with what it gained: published again
-                    self.on_detections(before[2], before_final[2], time.monotonic() - before[2].received_wall_s)
+            if result is not None and back is not None:
+                self._track_back(before, back)
 
-    def _tracked_back(self, before, before_final) -> bool:
-        """The scan before made final from the one just recognised (``before_final``, or None): its new detections
-        counted (``tracked_from_scan_after``), the kept ones fed to the runner (late: counted). Did it gain any?"""
-        if before_final is None:
-            return False
-        old = {id(d) for d in before[0][2].detections}
-        new = [d for d in before_final[2].detections if id(d) not in old]
-        self.stats["tracked_from_scan_after"] += len(new)
-        kept = [d for d in new if any(d is k for k in before_final[0])]
-        if kept:
-            self.runner.add_scan_detections(before[2].scan.scan_id, kept)
-        return bool(new)
+    def _track_back(self, before, back: Callable) -> None:
+        """The scan before made final from the one just published (``back()``: its detections went out first):
+        what it gained fed to the runner, which waited for it (``_tracking_back``), and the scan published again."""
+        before_final, err_text = None, ""
+        try:
+            before_final = back()
+        except SemslamError as err:
+            err_text = f"scan {before[2].scan_id}: {err}"
+        except Exception as err:  # noqa: BLE001 - as in _work
+            err_text = f"scan {before[2].scan_id}: {type(err).__name__}: {err}"
+        with self.lock:
+            self._tracking_back = math.inf
+            if self._finished:
+                return
+            if err_text:
+                self.stats["recognition_errors"] += 1
+                self.stats["last_error"] = err_text
+            added = tracked_back(self, before, before_final)
+            self._advance()
+        if added and self.on_detections is not None:
+            self.on_detections(before[2], before_final[2], time.monotonic() - before[2].received_wall_s)
 
     # ------------------------------------------------------------------ outputs
     def predict_to(self, t: float) -> "Prediction | None":
@@ -431,7 +425,7 @@ class LiveSlam:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             with self.lock:
-                if not self._pending:
+                if not self._pending and self._tracking_back == math.inf:
                     break
             time.sleep(0.01)
         self.slot.close()

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from typing import Any
 
 from ...pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory
+from ..messages import Scan
 
 #: wall-clock seconds without a message of one navigation kind (attitude, DVL) after which the scans still waiting
 #: for it are deskewed without waiting for that kind any longer (:meth:`LiveSlam.poll`): it stopped, or a recording
@@ -16,6 +18,31 @@ from ...pipeline.deskew import SMOOTHING_WINDOW_S, NavigationHistory
 NAVIGATION_WAIT_S = 1.0
 
 _NAV_KINDS = ("attitude", "dvl")
+
+
+@dataclass
+class ScanJob:
+    """A scan waiting for, or in, recognition."""
+
+    scan: Scan
+    received_wall_s: float
+    up_scanner: Any = None
+    abandoned: bool = False
+    motion: Any = None
+    navigation: Any = None  # the navigation held when it was ready (tracking from the scan before)
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def scan_id(self) -> int:
+        return self.scan.scan_id
+
+    @property
+    def start_s(self) -> float:
+        return self.scan.start_stamp_s
+
+    @property
+    def end_s(self) -> float:
+        return self.scan.end_stamp_s
 
 
 class DeskewQueue:
@@ -73,7 +100,8 @@ def recognise_job(live: Any, job: Any) -> tuple:
     the objects of the scan the worker recognised before as priors (``live._before``: its output, first point's
     stamp and job), and that scan made final from this one's objects when this one follows closely
     (:mod:`semslam.pipeline.tracking`; the motion between from the navigation held when the job was ready):
-    ``(detect_scan output, the scan before's final output or None)``."""
+    ``(detect_scan output, None or a function giving the scan before's final output)``: the worker calls it after
+    publishing this scan."""
     from ...pipeline.dataset_detection import detect_scan, priors_from_scan_before, track_from_scan_after
     from ...pipeline.tracking import follows_closely, tracks
 
@@ -91,5 +119,20 @@ def recognise_job(live: Any, job: Any) -> tuple:
     bsc = None if motion is None else before[2].scan
     if bsc is None or not follows_closely(before[1], bsc.start_stamp_s, bsc.end_stamp_s, sc.end_stamp_s):
         return out, None
-    return out, track_from_scan_after(live.recognizer, before[0], out[2].detections, motion, T_vs,
-                                      live.keep_unreliable)
+    return out, lambda: track_from_scan_after(live.recognizer, before[0], out[2].detections, motion, T_vs,
+                                              live.keep_unreliable)
+
+
+def tracked_back(live: Any, before: tuple, before_final: tuple | None) -> bool:
+    """The scan before (``before``: its output, first stamp and job) made final (``before_final``, or None): its new
+    detections counted (``live.stats["tracked_from_scan_after"]``), the kept ones fed to the runner (with
+    ``live.lock`` held). Did it gain any?"""
+    if before_final is None:
+        return False
+    old = {id(d) for d in before[0][2].detections}
+    new = [d for d in before_final[2].detections if id(d) not in old]
+    live.stats["tracked_from_scan_after"] += len(new)
+    kept = [d for d in new if any(d is k for k in before_final[0])]
+    if kept:
+        live.runner.add_scan_detections(before[2].scan.scan_id, kept)
+    return bool(new)
