@@ -191,6 +191,31 @@ class Runner:
         if self.start is not None:
             self._release(final=False)
 
+    def replace_scan_detections(self, scan_id: int, detections: list[Detection], stats: dict | None = None) -> None:
+        """A scan's detections made final after they were fed (the live node makes the scan before final from the
+        one after it): those no longer among ``detections`` withdrawn from the delay line (the node holds the
+        filter behind the scan until then), the new ones fed as :meth:`add_scan_detections` does, the scan's record
+        (and its ``stats``, when given) replaced."""
+        final = list(detections)
+        old = self.detections_by_scan.get(scan_id, [])
+        gone = {id(d) for d in old} - {id(d) for d in final}
+        if gone:
+            for entry in self._heap:
+                if entry[3] == "detections":
+                    entry[4][:] = [d for d in entry[4] if id(d) not in gone]
+            self._heap = [e for e in self._heap if e[3] != "detections" or e[4]]
+            heapq.heapify(self._heap)
+        if stats is not None:
+            self.scans = [stats if st.get("scan_id") == scan_id else st for st in self.scans]
+        known = {id(d) for d in old}
+        self._detections(scan_id, [d for d in final if id(d) not in known])
+        if final:
+            self.detections_by_scan[scan_id] = final
+        else:
+            self.detections_by_scan.pop(scan_id, None)
+        if self.start is not None:
+            self._release(final=False)
+
     def estimate(self, mode: str):
         """The current :class:`~semslam.slam.SlamEstimate` of ``mode`` (None before the start): the filter at the
         last released message, ``hold_s`` behind the newest one."""

@@ -603,3 +603,44 @@ def test_the_node_publishes_a_scan_before_tracking_back_into_the_scan_before(ros
     assert out.counts["late_dropped"] == {} == ref.counts["late_dropped"]
     np.testing.assert_allclose(out.results["pose"].position_ned_m, ref.results["pose"].position_ned_m,
                                rtol=0, atol=1e-9)
+
+
+def test_a_scan_the_node_makes_final_replaces_what_it_fed_as_semslam_run_does(ros1_bag, monkeypatch):
+    """The tracking stage standing in so that every scan followed closely has its own detection replaced by the scan
+    after's object carried back (a cluster recognised alone as one class, tracked as another): the node, which fed
+    the scan before it was final, withdraws what it replaced; with ``keep_unreliable`` its odometry, detections per
+    scan and scan records are `semslam run`'s, nothing dropped late."""
+    from semslam.pipeline import tracking
+    from semslam.run import open_dive, run_stream
+    from semslam.run.ros1.decode import LiveDecoder
+    from semslam.run.ros1.live import LiveSlam
+    from tests._support.ros1 import raw_bag_messages
+    from tests.pipeline.test_tracking import _tracks_every_prior
+
+    def replaces(rec, ctx, seg, outcomes, detections, priors, timings):
+        outcomes, with_new = _tracks_every_prior(rec, ctx, seg, outcomes, detections, priors, timings)
+        return outcomes, with_new[len(detections):] or detections
+
+    monkeypatch.setattr(tracking, "track_rejected", replaces)
+    bag, tmap, vehicle = ros1_bag
+    ref = run_stream(open_dive(bag, topics=tmap, vehicle=vehicle), modes=("pose",), recognizer=_ContextRecorder(),
+                     keep_unreliable=True)
+    dec = LiveDecoder(tmap, vehicle)
+    msgs = [dec.decode(t, ty, raw, md5sum=md5, definition=d, receive_ns=ns) for t, ty, md5, d, raw, ns
+            in raw_bag_messages(bag, [tmap.attitude, tmap.dvl, tmap.depth, tmap.scans])]
+    origin = msgs[0].stamp_ns - msgs[0].stamp_ns % 1_000_000_000
+    live = LiveSlam(vehicle, _ContextRecorder(), mode="pose", scan_queue="all", max_hold_s=1e6, keep_unreliable=True)
+    for m in msgs:
+        live.add((m.stamp_ns - origin) / 1e9, m.kind, m.payload)
+    out = live.close()
+
+    def labelled(by_scan):
+        return {sid: [(d.extras.get("tracked_from_scan"), d.reliable) for d in v] for sid, v in by_scan.items()}
+
+    replaced = [sid for sid, v in ref.detections_by_scan.items() if "tracked_from_scan" in v[0].extras]
+    assert len(replaced) >= 5 and live.stats["tracked_from_scan_after"] == len(replaced)
+    assert labelled(out.detections_by_scan) == labelled(ref.detections_by_scan)
+    assert [st["n_tracked"] for st in live.runner.scans] == [st["n_tracked"] for st in ref.scans]
+    assert out.counts["late_dropped"] == {} == ref.counts["late_dropped"]
+    np.testing.assert_allclose(out.results["pose"].position_ned_m, ref.results["pose"].position_ned_m,
+                               rtol=0, atol=1e-9)

@@ -10,6 +10,7 @@ import pytest
 
 from semslam.dataset import PositionFixLog
 from semslam.errors import InputError
+from semslam.geometry import RigidTransform
 from semslam.simulation.synthetic import square_dataset
 from semslam.run import Attitude, Depth, Fix, Runner, open_dive, run_stream
 from semslam.run.health import HealthLimits, health_verdict
@@ -96,6 +97,28 @@ def test_detections_recognised_elsewhere_enter_at_their_stamps_or_are_counted_la
     ref = run_slam(mission, dets, mode="pose", symmetries={})
     np.testing.assert_array_equal(out.results["pose"].position_ned_m, ref.position_ned_m)
     assert r.estimate("pose") is not None and r.estimate("dr") is None
+
+
+def test_a_scan_made_final_after_it_was_fed_replaces_what_it_fed(mission, dets):
+    """The live node's scan before, made final from the scan after: each scan first fed with a wrong detection
+    (moved 2 m) besides its own, then replaced by its final detections before the filter passes it, gives the map of
+    the final detections fed once; its record and stats are the final ones, nothing counted late."""
+    ref = run_slam(mission, dets, mode="pose", symmetries={})
+    r = Runner(mission.vehicle, modes=("pose",), symmetries={})
+    pending = sorted(dets.items(), key=lambda kv: kv[1][0].stamp_s)
+    for msg in dataset_messages(mission, scans=False):
+        while pending and msg.stamp_s > pending[0][1][0].stamp_s - 1.0:
+            sid, group = pending.pop(0)
+            wrong = replace(group[0], T_sensor_object=group[0].T_sensor_object @ RigidTransform.from_xyz_rpy(
+                [2.0, 0.0, 0.0], [0.0, 0.0, 0.0]))
+            r.add_scan_detections(sid, [wrong, *group[1:]], {"scan_id": sid, "n_kept": len(group)})
+            r.replace_scan_detections(sid, group, {"scan_id": sid, "n_kept": len(group), "final": True})
+        r.feed(msg)
+    out = r.finish()
+    assert out.counts["late_dropped"] == {}
+    np.testing.assert_array_equal(out.results["pose"].position_ned_m, ref.position_ned_m)
+    assert all(out.detections_by_scan[sid] == group for sid, group in dets.items())
+    assert len(r.scans) == len(dets) and all(st["final"] for st in r.scans)
 
 
 def test_health_verdict_levels_follow_the_documented_limits(mission):

@@ -125,14 +125,13 @@ def recognise_job(live: Any, job: Any) -> tuple:
 
 def tracked_back(live: Any, before: tuple, before_final: tuple | None) -> bool:
     """The scan before (``before``: its output, first stamp and job) made final (``before_final``, or None): its new
-    detections counted (``live.stats["tracked_from_scan_after"]``), the kept ones fed to the runner (with
-    ``live.lock`` held). Did it gain any?"""
+    detections counted (``live.stats["tracked_from_scan_after"]``), its kept detections in the runner made the final
+    ones (a cluster tracked as another class replaces what it was alone) with ``live.lock`` held. Did it gain any?"""
     if before_final is None:
         return False
     old = {id(d) for d in before[0][2].detections}
     new = [d for d in before_final[2].detections if id(d) not in old]
     live.stats["tracked_from_scan_after"] += len(new)
-    kept = [d for d in new if any(d is k for k in before_final[0])]
-    if kept:
-        live.runner.add_scan_detections(before[2].scan.scan_id, kept)
+    if new:
+        live.runner.replace_scan_detections(before[2].scan.scan_id, before_final[0], before_final[1])
     return bool(new)
