@@ -102,6 +102,10 @@ CONFIGS = {
     # the seabed preset's pipeline section as it is (semslam.run.config.PRESETS); its up_from_attitude is --upright
     "seabed": {f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
                if f.name not in ("descriptor", "classifier")},
+    # seabed trying the two next nearest classes after a failed verification (session 32; not adopted: seed 0 and the
+    # real models' seeds 0 and 3 unchanged)
+    "seabed_next2": {**{f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
+                        if f.name not in ("descriptor", "classifier")}, "verify_next_classes": 2},
     # seabed with a border-cut cluster's pose search against the whole scan (session 27; not adopted: seed 2's
     # precision 95.3 -> 93.6 %)
     "seabed_border_scene": {**{f.name: getattr(_SEABED, f.name) for f in dataclasses.fields(_SEABED)
