@@ -59,7 +59,35 @@ def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     The cell centres per axis and the offsets times the quantum are tabulated first (the same products
     and sums as :func:`_cell_nearest`, so the same bits).
     """
+    nx, ny, nz, cx, cy, cz, qv, flat = _tables(origin, nearest)
     H = Rs.shape[0]
+    cost = np.empty(H)
+    for h in prange(H):
+        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv,
+                                       truncations, tau_m, np.inf)
+    return cost
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def align_and_score_below(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m, bounds):
+    """:func:`align_and_score` for a caller that only wants the hypotheses scoring below ``bounds`` (H,): a
+    hypothesis whose cost reaches its bound while it is summed stops there and returns that partial cost, which is
+    at least the bound and at most the full cost (the sum only grows), so ``cost < bounds`` is the same as with
+    :func:`align_and_score`, and so are the costs and translations of those below. The pose search's translation
+    starts of a border-cut cluster (dozens per orientation, each kept only when it beats the best so far) spend a
+    quarter of their time in the final sum."""
+    nx, ny, nz, cx, cy, cz, qv, flat = _tables(origin, nearest)
+    H = Rs.shape[0]
+    cost = np.empty(H)
+    for h in prange(H):
+        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv,
+                                       truncations, tau_m, bounds[h])
+    return cost
+
+
+@njit(cache=True, inline="always")
+def _tables(origin, nearest):
+    """The field's shape, cell centres per axis, offsets times the quantum (index + 128) and raveled offsets."""
     nx, ny, nz = nearest.shape[0], nearest.shape[1], nearest.shape[2]
     c, qm = origin[3], origin[4]
     cx, cy, cz = np.empty(nx), np.empty(ny), np.empty(nz)
@@ -72,12 +100,7 @@ def align_and_score(Rs, ts, src, origin, cell_m, nearest, truncations, tau_m):
     qv = np.empty(256)
     for o in range(256):
         qv[o] = (o - 128) * qm
-    flat = nearest.reshape(-1)
-    cost = np.empty(H)
-    for h in prange(H):
-        cost[h] = _align_and_score_one(Rs[h], ts[h], src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv,
-                                       truncations, tau_m)
-    return cost
+    return nx, ny, nz, cx, cy, cz, qv, nearest.reshape(-1)
 
 
 @njit(cache=True, inline="always")
@@ -99,8 +122,9 @@ def _lookup(p0, p1, p2, o0, o1, o2, inv, nx, ny, nz, flat, cx, cy, cz, qv):
 
 
 @njit(cache=True, nogil=True)
-def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv, truncations, tau_m):
-    """:func:`align_and_score` of one hypothesis (``t`` (3,) updated in place)."""
+def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz, qv, truncations, tau_m, bound):
+    """:func:`align_and_score` of one hypothesis (``t`` (3,) updated in place); the cost summed so far once it
+    reaches ``bound`` (checked every 16 points; ``inf``: never)."""
     N = src.shape[0]
     inv = 1.0 / cell_m
     o0, o1, o2 = origin[0], origin[1], origin[2]
@@ -140,6 +164,8 @@ def _align_and_score_one(R, t, src, origin, cell_m, flat, nx, ny, nz, cx, cy, cz
         else:
             d2 = (x - p0) ** 2 + (y - p1) ** 2 + (z - p2) ** 2
             c += min(d2, tau2) / tau2
+        if (n & 15) == 15 and c / N >= bound:
+            return c / N
     return c / N
 
 

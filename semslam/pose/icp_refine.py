@@ -94,11 +94,12 @@ def back_facing_shares(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, Ts
     away from the sensor (0 for a front view, ~1 for the object seen turned around)."""
     if model.visibility_points is None or not len(model.visibility_points) or not Ts:
         return np.zeros(len(Ts))
-    tree = model.visibility_tree
+    n = len(cluster)
+    ps = [cluster @ T[:3, :3].T + T[:3, 3] for T in Ts]
+    js = model.visibility_tree.query(np.vstack(ps), workers=-1)[1]  # one query of every pose's points, both cores
     out = np.empty(len(Ts))
-    for k, T in enumerate(Ts):
-        p = cluster @ T[:3, :3].T + T[:3, 3]
-        j = tree.query(p)[1]
+    for k, (T, p) in enumerate(zip(Ts, ps)):
+        j = js[k * n:(k + 1) * n]
         out[k] = float(np.mean(np.einsum("ij,ij->i", model.visibility_normals[j], T[:3, :3] @ vp + T[:3, 3] - p) < 0))
     return out
 

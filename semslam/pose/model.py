@@ -253,6 +253,26 @@ class PoseModel:
         """KD-tree of ``visibility_points``, built on first use and kept (the back-facing test of every pose)."""
         return cKDTree(self.visibility_points)
 
+    @functools.cached_property
+    def hull_points(self) -> np.ndarray:
+        """The vertices (K, 3) of the convex hull of ``points_object`` (object frame), built on first use and kept:
+        the deepest model point along any direction is one of them (the floor check of every pose asks for it:
+        :func:`semslam.pipeline.hypothesis.within_planes`). Every point when the hull is degenerate (a flat
+        model). Qhull leaves out points within its rounding of the hull, so a bound from these is good to
+        :data:`HULL_SLACK_M`."""
+        from scipy.spatial import ConvexHull, QhullError
+
+        pts = self.points_object
+        try:
+            return np.ascontiguousarray(pts[ConvexHull(pts).vertices])
+        except (QhullError, ValueError):
+            return pts
+
+
+#: How far inside the hull of :attr:`PoseModel.hull_points` a left-out model point can lie at most (m): Qhull's
+#: rounding on coordinates of metres is ~1e-15 m; this allowance is a million times that.
+HULL_SLACK_M = 1e-9
+
 
 
 def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseModel:

@@ -271,10 +271,12 @@ class _TranslationStarts:
         first = radius - rc
         for d in self.offsets:  # the cluster shifted by d in the scanner frame: t + R d
             t = np.ascontiguousarray(first + (flat @ d).reshape(-1, 3))
-            fit = K.align_and_score(R, t, src, field.params, field.cell_m, field.offsets, truncations, self.tau_m)
             # a start off the expected depth must fit clearly better: a flat plate's seen face fits the far face of
             # the plate lifted towards the sensor as well as its own, and only the first keeps it where it lies
-            better = fit < best_fit - (PARTIAL_DEPTH_MARGIN if abs(float(d @ self.view)) > 1e-9 else 0.0)
+            bound = best_fit - (PARTIAL_DEPTH_MARGIN if abs(float(d @ self.view)) > 1e-9 else 0.0)
+            fit = K.align_and_score_below(R, t, src, field.params, field.cell_m, field.offsets, truncations,
+                                          self.tau_m, bound)
+            better = fit < bound
             best_fit[better], best_t[better] = fit[better], t[better]
         return best_fit, best_t
 

@@ -164,7 +164,10 @@ def test_the_pose_search_is_told_that_a_pose_inside_the_floor_is_inadmissible(sc
     from semslam.pipeline.hypothesis import _above_floor
 
     seg, cluster = scene
+    from semslam.pose.model import PoseModel
+
     model = SimpleNamespace(points_object=_slab(0.12, 0.012))
+    model.hull_points = PoseModel.hull_points.func(model)
     admissible = _above_floor(PipelineConfig(verify_max_plane_penetration_m=0.01), seg, cluster, model)
     assert admissible(_pose(FLOOR_Z)) and admissible(_pose(FLOOR_Z + 0.008))
     assert not admissible(_pose(FLOOR_Z + 0.012))
@@ -212,3 +215,40 @@ def test_the_fast_verdict_equals_the_exact_depth_against_the_limit(monkeypatch):
     H.within_planes(on_floor, top, disc, _pose(FLOOR_Z + 0.01), 0.01)  # exactly at the limit: the exact depth
     assert len(calls) == 1
     assert H.within_planes(None, top, disc, _pose(FLOOR_Z + 0.05), 0.01)  # no segmentation: not judged
+
+
+def test_the_floor_verdict_from_the_hull_is_the_measured_depths_verdict():
+    """Catches the convex-hull shortcut of the floor check deciding otherwise than the depth it stands for: over
+    random poses of a flange-like model about the floor and a wall (deep, shallow, at the limit to a micron), the
+    verdict with the hull, without it, and ``not plane_penetration_m > limit`` agree."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from semslam.pipeline.hypothesis import within_planes
+    from semslam.pose.model import PoseModel
+
+    disc = _disc(0.15, 0.03)
+    hull = PoseModel.hull_points.func(SimpleNamespace(points_object=disc))
+    assert 10 < len(hull) < len(disc) // 4
+    floor = SimpleNamespace(coefficients=np.array([0.0, 0.0, -1.0, FLOOR_Z]))
+    wall = SimpleNamespace(coefficients=np.array([-1.0, 0.0, 0.0, 0.16]))
+    top = _grid(-0.1, 0.1, -0.1, 0.1, FLOOR_Z - 0.03)
+    rng = np.random.default_rng(3)
+    limit = 0.01
+    for planes in ([floor], [floor, wall], [wall, floor]):
+        seg = SimpleNamespace(planes=planes)
+        verdicts = []
+        for k in range(150):
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_rotvec(rng.normal(scale=0.05, size=3)).as_matrix()
+            T[:3, 3] = [rng.normal(scale=0.01), 0.0, FLOOR_Z + rng.uniform(-0.01, 0.03)]
+            if k % 10 == 0:  # the deepest point at the limit to a micron
+                T[2, 3] += limit - (np.max(disc @ T[2, :3] + T[2, 3]) - FLOOR_Z) + 1e-6 * (k % 3 - 1)
+            want = not plane_penetration_m(seg, top, disc, T) > limit
+            assert within_planes(seg, top, disc, T, limit, hull_points=hull) == want
+            assert within_planes(seg, top, disc, T, limit) == want
+            verdicts.append(want)
+        assert 0 < sum(verdicts) < len(verdicts)
+    flat = _grid(-0.1, 0.1, -0.1, 0.1, 0.0)  # a degenerate hull: every point
+    assert len(PoseModel.hull_points.func(SimpleNamespace(points_object=flat))) == len(flat)

@@ -361,3 +361,32 @@ def test_icp_step_falls_back_to_lu_on_the_damped_system_not_on_a_half_factored_o
         _damped_step(H, g, lam, A, delta)
         want = -np.linalg.solve(H + lam * np.eye(6), g)
         np.testing.assert_allclose(delta, want, rtol=0, atol=1e-9 * np.abs(want).max())
+
+
+def test_align_and_score_below_decides_every_hypothesis_as_the_full_cost_does():
+    """Catches the early stop of the border-cut starts changing which start wins: with random bounds, the costs
+    below their bound and the translations are those of align_and_score bit for bit, and a stopped cost is at least
+    its bound and at most the full cost."""
+    from semslam.pose import _search_kernels as K
+    from semslam.pose.search import DistanceField, so3_grid
+
+    rng = np.random.default_rng(8)
+    d = rng.normal(size=(6000, 3))
+    model = 0.05 * d / np.linalg.norm(d, axis=1, keepdims=True) * [1.0, 0.5, 0.3]
+    field = DistanceField.build(model, cell_m=0.0025)
+    Rs = so3_grid(256)
+    src = np.ascontiguousarray((model[rng.integers(0, len(model), 80)] + rng.normal(scale=0.001, size=(80, 3)))
+                               @ Rs[17])
+    ts = np.ascontiguousarray(rng.normal(scale=0.01, size=(256, 3)))
+    trunc = np.array([0.03, 0.015, 0.008])
+    t_full, t_below = ts.copy(), ts.copy()
+    full = K.align_and_score(Rs, t_full, src, field.params, field.cell_m, field.offsets, trunc, 0.006)
+    bounds = np.ascontiguousarray(full + rng.uniform(-0.3, 0.3, len(full)))
+    below = K.align_and_score_below(Rs, t_below, src, field.params, field.cell_m, field.offsets, trunc, 0.006, bounds)
+    wins = full < bounds
+    assert 20 < wins.sum() < 236  # both kinds among them
+    np.testing.assert_array_equal(below < bounds, wins)
+    np.testing.assert_array_equal(below[wins], full[wins])
+    np.testing.assert_array_equal(t_below, t_full)
+    assert np.all(below[~wins] >= bounds[~wins]) and np.all(below[~wins] <= full[~wins])
+    assert np.any(below[~wins] < full[~wins])  # some did stop early
