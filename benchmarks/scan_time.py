@@ -35,13 +35,13 @@ def _load() -> str:
     return "load %.2f %.2f %.2f" % os.getloadavg()
 
 
-def _pipeline_config(preset: str, config: str | None):
+def _pipeline_config(preset: str | None, config: str | None):
     from semslam.run.config import load_run_config
 
     return load_run_config(config, preset=preset).pipeline_config()
 
 
-def time_dive(run: Path, *, preset: str, config: str | None, up_from_attitude: bool, seed: int) -> list[dict]:
+def time_dive(run: Path, *, preset: str | None, config: str | None, up_from_attitude: bool, seed: int) -> list[dict]:
     """Per-scan statistics (``timings_ms`` per stage) of ``semslam detect`` on ``run``'s mission and database."""
     from semslam.recognition import load_database
     from semslam.run.dive import detect_dive
@@ -93,7 +93,8 @@ def profile_dive(run: Path, *, top: int = 30, **kw) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", default="runs/demo", help="a demo run directory (mission/ and db.npz)")
-    ap.add_argument("--preset", default="default", help="named settings (default, cluttered, seabed, depth-camera)")
+    ap.add_argument("--preset", default=None,
+                    help="named settings (default, cluttered, seabed, depth-camera; default: the --config file's)")
     ap.add_argument("--config", default=None, help="a configuration file on top of the preset")
     ap.add_argument("--up-from-attitude", action="store_true", help="as `semslam run --up-from-attitude`")
     ap.add_argument("--seed", type=int, default=0)
@@ -110,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
 
     period_s = float(np.median(np.diff([s.start_stamp_s for s in load_dataset(str(run / "mission")).scans])))
     kw = dict(preset=args.preset, config=args.config, up_from_attitude=args.up_from_attitude, seed=args.seed)
-    print(f"{run}: preset {args.preset}{' + ' + args.config if args.config else ''}"
+    preset = args.preset or "of the config file"
+    print(f"{run}: preset {preset}{' + ' + args.config if args.config else ''}"
           f"{', up from the attitude' if args.up_from_attitude else ''}; {_load()}")
     t0 = time.perf_counter()
     scans = time_dive(run, **kw)
