@@ -212,7 +212,9 @@ class ScanRecognizer:
         parts, tolerance = self.config.parts, self.config.segmentation.cluster_tolerance_m
         for label in self.db.classes:
             first = int(self.db.views_of(label)[0])
-            self.pose_model(label, first)
+            model = self.pose_model(label, first)
+            if self.config.verify_max_plane_penetration_m is not None and self.config.estimate_pose:
+                model.hull_points  # noqa: B018 (the floor check's hull, built once: 0.1-0.3 s on a large model)
             if parts is not None:  # the part and fragment tests' model
                 self.surface_model(label, first)
         if parts is not None and parts.view_gaps and not isinstance(tolerance, str):  # gaps learnt from the views

@@ -274,7 +274,6 @@ class PoseModel:
 HULL_SLACK_M = 1e-9
 
 
-
 def prepare_pose_model(model: Any, config: PoseConfig | None = None) -> PoseModel:
     """Prepare an object model: distance field, visibility samples and SO(3) grid for the grid search
     (or voxelised points + FPFH for the RANSAC), ICP target with normals.

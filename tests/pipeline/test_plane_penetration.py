@@ -116,6 +116,21 @@ def test_the_recogniser_measures_it_on_real_scans_of_objects_on_the_tank_floor(b
     assert all(0.0 <= v < 0.005 for v in depths), depths
 
 
+def test_warm_up_builds_the_floor_checks_hull_when_the_check_is_on(builtin_db_fresh):
+    """Catches the live node's first scan of each class paying for the convex hull the floor check bounds depths with
+    (0.1-0.3 s on a large model): ``warm_up`` builds it with the check on, and not without."""
+    from semslam.pipeline import ScanRecognizer
+
+    on = ScanRecognizer(builtin_db_fresh, PipelineConfig(verify_max_plane_penetration_m=0.01))
+    off = ScanRecognizer(builtin_db_fresh)
+    on.warm_up()
+    off.warm_up()
+    for label in builtin_db_fresh.classes:
+        first = int(builtin_db_fresh.views_of(label)[0])
+        assert "hull_points" in vars(on.pose_model(label, first))
+        assert "hull_points" not in vars(off.pose_model(label, first))
+
+
 def _disc(radius_m: float, thickness_m: float, step=0.004) -> np.ndarray:
     """Surface samples of a disc in its object frame, as ``_slab``: bottom face at z = 0, top at z = -thickness."""
     faces = _grid(-radius_m, radius_m, -radius_m, radius_m, 0.0, step)
