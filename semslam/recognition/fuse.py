@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 from ..cloud import PointCloud
 from ..errors import DatabaseError, RegistrationError
 from ..geometry import RigidTransform, rotation_from_quat_wxyz
-from ..registration import align_icp, align_upright, register
+from ..registration import UprightConfig, align_icp, align_upright, register
 from ..registration._upright_kernels import point_to_plane_4dof, target_normals
 
 __all__ = ["FusionReport", "fuse_class_views", "read_poses_csv", "read_up_csv"]
@@ -43,6 +43,9 @@ _UP_COLUMNS = ("view", "x", "y", "z")
 MAX_CSV_BYTES = 16 << 20
 #: rotation tolerance of a poses.csv matrix (max |R^T R - I|, |det R - 1|)
 ROTATION_TOLERANCE = 1e-3
+#: a view is registered onto the union of the views before it in one direction: the union shows what the view
+#: does not, so scoring the union's points too (the symmetric registration between two views) would penalise it
+_ONE_WAY = UprightConfig(symmetric=False)
 
 
 @dataclass
@@ -256,7 +259,8 @@ def _estimate(pts: list, ups: list | None, seed: int, label: str, ids: list) -> 
         model = np.concatenate([_apply(T, p) for T, p in zip(Ts, pts[:i])])
         try:
             if ups is not None:
-                res = align_upright(pts[i], model, up_source=ups[i], up_target=ups[0])
+                # one direction: a view onto the union of the views before it (that shows what it does not)
+                res = align_upright(pts[i], model, up_source=ups[i], up_target=ups[0], config=_ONE_WAY)
             else:
                 res = register(pts[i], model, seed=seed)
         except RegistrationError as exc:
