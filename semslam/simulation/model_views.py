@@ -41,7 +41,7 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
     classes : dict
         Per label ``{"symmetry": Symmetry, "size_xyz_m": ndarray (3,)}``.
     """
-    from .kinect import kinect_view
+    from .kinect import RestScene
 
     caller = "models_view_clouds"
     if not isinstance(models, dict) or not models or not all(isinstance(m, ObjectModel) for m in models.values()):
@@ -54,7 +54,10 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
     with progress_steps(progress, n * len(models), "render views", "view") as step:
         for label, model in models.items():
             rests = _tied_rests(model) if tied_rests else [0]
-            mesh = model.mesh.copy().apply_transform(model.resting_poses[0])
+            scenes = {rest: RestScene(model if rest == 0 else
+                                      dataclasses.replace(model, resting_poses=[model.resting_poses[rest]]))
+                      for rest in rests}
+            mesh = scenes[rests[0]].mesh
             radius = float(np.linalg.norm(mesh.vertices - mesh.bounds.mean(axis=0), axis=1).max())
             if cfg.distance_m <= radius:
                 raise DatabaseError(f"The Kinect distance {cfg.distance_m:g} m must exceed the bounding radius of the "
@@ -63,8 +66,7 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
             for k in range(n):
                 az = 2 * np.pi * k / n
                 rest = rests[k % len(rests)]
-                posed = model if rest == 0 else dataclasses.replace(model, resting_poses=[model.resting_poses[rest]])
-                cloud = kinect_view(posed, az, config=cfg, seed=rng)
+                cloud = scenes[rest].view(az, config=cfg, seed=rng)
                 if cloud.n_points == 0:
                     raise DatabaseError(f"The Kinect view {k} of the class {label!r} saw no point (distance "
                                         f"{cfg.distance_m:g} m, elevation {math.degrees(cfg.elevation_rad):g} deg).")
