@@ -6,6 +6,7 @@ Run from the repository root::
     .venv/bin/python benchmarks/database.py                      # everything
     .venv/bin/python benchmarks/database.py --only io            # load time of a 10,000-view file
     .venv/bin/python benchmarks/database.py --only loo --only reject --db builtin.npz
+    .venv/bin/python benchmarks/database.py --only dense-model --faces 1000000   # db build of one dense CAD mesh
 
 Prints markdown tables. Timings are wall-clock on the current machine (best of ``--repeat``).
 """
@@ -182,9 +183,53 @@ def bench_reject(args, db) -> None:
           + ", ".join(f"{k} {100 * v:.0f}%" for k, v in default_far.items()))
 
 
+def dense_model(faces: int, folder: Path) -> int:
+    """A valve-like mesh of about ``faces`` triangles (a sphere body, a pipe through it, a stem and a handwheel
+    torus) written as ``folder/dense_valve.stl`` with its ``models.toml``; returns the face count."""
+    import trimesh
+
+    k = max(faces / 937_280, 1e-3) ** 0.5  # the defaults below give 937,280 faces
+    body = trimesh.creation.icosphere(subdivisions=max(1, min(8, round(7 + np.log2(k)))), radius=0.08)
+    pipe = trimesh.creation.cylinder(radius=0.04, height=0.4, sections=max(16, int(2000 * k)))
+    pipe.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    stem = trimesh.creation.cylinder(radius=0.012, height=0.2, sections=max(16, int(400 * k)))
+    stem.apply_translation([0, 0, 0.1])
+    wheel = trimesh.creation.torus(major_radius=0.08, minor_radius=0.01, major_sections=max(16, int(1500 * k)),
+                                   minor_sections=max(8, int(200 * k)))
+    wheel.apply_translation([0, 0, 0.2])
+    mesh = trimesh.util.concatenate([body, pipe, stem, wheel])
+    mesh.export(folder / "dense_valve.stl")
+    (folder / "models.toml").write_text('[dense_valve]\nfile = "dense_valve.stl"\nunit = "m"\n')
+    return len(mesh.faces)
+
+
+def bench_dense_model(args) -> None:
+    """``semslam db build --models DIR --sensor laser`` of one dense mesh in a fresh process: wall time and the
+    child's peak resident memory (the user's path: a CAD export at full tessellation)."""
+    import resource
+    import subprocess
+    import sys
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "models"
+        folder.mkdir()
+        n = dense_model(args.faces, folder)
+        size_mb = (folder / "dense_valve.stl").stat().st_size / 1e6
+        cmd = [sys.executable, "-m", "semslam.cli.main", "db", "build", "--models", str(folder), "--sensor", "laser",
+               "--out", str(Path(tmp) / "db.npz")]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True)
+        wall = time.perf_counter() - t0
+        rss_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
+    print("\n## `db build --models DIR --sensor laser` of one dense mesh (fresh process)\n")
+    print("| faces | STL MB | wall s | peak RSS GB |\n|---:|---:|---:|---:|")
+    print(f"| {n} | {size_mb:.1f} | {wall:.1f} | {rss_gb:.2f} |")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--only", action="append", choices=("io", "loo", "reject"))
+    p.add_argument("--only", action="append", choices=("io", "loo", "reject", "dense-model"))
+    p.add_argument("--faces", type=int, default=1_000_000, help="faces of the dense-model mesh (about)")
     p.add_argument("--n-views", type=int, default=10000)
     p.add_argument("--points-per-view", type=int, default=1000)
     p.add_argument("--repeat", type=int, default=3)
@@ -192,9 +237,11 @@ def main() -> None:
     p.add_argument("--n-clutter", type=int, default=60)
     p.add_argument("--db", help="built-in database file: read if it exists, else built and written there")
     args = p.parse_args()
-    parts = args.only or ["io", "loo", "reject"]
+    parts = args.only or ["io", "loo", "reject", "dense-model"]
     if "io" in parts:
         bench_io(args)
+    if "dense-model" in parts:
+        bench_dense_model(args)
     if "loo" in parts or "reject" in parts:
         db = get_builtin_db(args)
         if "loo" in parts:

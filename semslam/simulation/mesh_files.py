@@ -27,6 +27,8 @@ from ..errors import DatabaseError
 from .mesh_orientation import orient_outward
 
 __all__ = [
+    "MAX_MESH_FACES",
+    "MAX_MESH_FILE_BYTES",
     "MESH_FORMATS",
     "MESH_SUFFIXES",
     "OPTIONAL_READERS",
@@ -47,6 +49,14 @@ MESH_FORMATS = {
     ".gltf": ("glTF", True, None), ".glb": ("glTF", True, None),
     ".step": ("STEP", True, "cascadio"), ".stp": ("STEP", True, "cascadio"),
 }
+#: Triangles of one model read at most: building a database takes ~1.5 GB of memory and ~30 s per million triangles
+#: (benchmarks/database.py --only dense-model: 976k triangles 34 s / 1.65 GB, 3.2 million 97 s / 4.9 GB), and
+#: recognition gains nothing from a finer tessellation than the scanner's millimetres.
+MAX_MESH_FACES = 5_000_000
+#: Model files larger than this are refused before they are read (an ASCII STL of ~5 million triangles).
+MAX_MESH_FILE_BYTES = 1536 << 20
+_DECIMATE = ("decimate it to about a millimetre's detail (MeshLab's quadric edge collapse, or a coarser export "
+             "tolerance in your CAD tool): recognition does not use finer detail.")
 #: Model files read (suffixes, lower case).
 MESH_SUFFIXES = tuple(MESH_FORMATS)
 #: Optional readers: module -> (PyPI package, semslam extra that installs it).
@@ -176,6 +186,11 @@ def load_mesh(path: Path, unit: str | None, where: str) -> tuple[trimesh.Trimesh
         raise DatabaseError(f"{where}: the mesh file {str(path)!r} is in a format semslam does not read; expected "
                             f"one of {_formats_text()}. Got {path.suffix or 'no suffix'!r} instead.")
     name, states_unit, module = MESH_FORMATS[suffix]
+    size = path.stat().st_size
+    if size > MAX_MESH_FILE_BYTES:
+        raise DatabaseError(f"{where}: the mesh file {str(path)!r} must be at most {MAX_MESH_FILE_BYTES >> 20} MiB "
+                            f"({MAX_MESH_FACES:,} triangles at most are read). Got {size / 2**20:,.0f} MiB instead: "
+                            f"{_DECIMATE}")
     if module is not None and not _has_module(module):
         package, extra = OPTIONAL_READERS[module]
         raise DatabaseError(f"{where}: reading the {name} file {str(path)!r} needs the optional reader {package!r}, "
@@ -216,6 +231,10 @@ def load_mesh(path: Path, unit: str | None, where: str) -> tuple[trimesh.Trimesh
                           MultiMeshSceneWarning, stacklevel=3)
     if not meshes:
         raise DatabaseError(f"{where}: the mesh file {str(path)!r} must hold triangles. Got none instead (empty mesh).")
+    n_faces = sum(len(m.faces) for m in meshes)
+    if n_faces > MAX_MESH_FACES:
+        raise DatabaseError(f"{where}: the mesh file {str(path)!r} must hold at most {MAX_MESH_FACES:,} triangles. "
+                            f"Got {n_faces:,} instead: {_DECIMATE}")
     mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
     vertices = np.asarray(mesh.vertices, dtype=float)
     bad = ~np.all(np.isfinite(vertices), axis=1)

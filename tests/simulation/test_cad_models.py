@@ -7,6 +7,7 @@ objects and recognise them in simulated scans."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -226,3 +227,23 @@ def test_a_model_file_outside_the_models_folder_is_refused(tmp_path, how):
     (folder / "models.toml").write_text(f'[box]\nfile = "{name}"\nunit = "m"\n')
     with pytest.raises(DatabaseError, match=r"'file'.*(inside|leads out of) the models folder"):
         read_models(folder)
+
+
+def test_a_mesh_beyond_the_size_limits_is_refused_before_it_costs_memory(tmp_path, monkeypatch, capsys):
+    """Building a database costs ~1.5 GB per million triangles: a file larger than MAX_MESH_FILE_BYTES is refused
+    before it is read, a mesh of more than MAX_MESH_FACES triangles once read, each in one line that says to
+    decimate it (the limits lowered here so that a small box crosses them)."""
+    import semslam.simulation.mesh_files as mesh_files
+
+    d = _box_dir(tmp_path, '[box]\nfile = "box.stl"\nunit = "mm"\n')  # 12 triangles, 684 bytes
+    monkeypatch.setattr(mesh_files, "MAX_MESH_FACES", 11)
+    with pytest.raises(DatabaseError, match=r"class 'box'.*box\.stl.*at most 11 triangles\. Got 12 instead: decimate"):
+        read_models(d)
+    monkeypatch.setattr(mesh_files, "MAX_MESH_FILE_BYTES", 100)
+    assert main(["db", "build", "--models", str(d), "--out", str(tmp_path / "db.npz"), "--n-views", "2"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and re.search(r"box\.stl.*must be at most 0 MiB .* Got 0 MiB instead: decimate", err[0])
+    assert not (tmp_path / "db.npz").exists()
+    monkeypatch.setattr(mesh_files, "MAX_MESH_FACES", 12)
+    monkeypatch.setattr(mesh_files, "MAX_MESH_FILE_BYTES", 684)
+    assert read_models(d)["box"].mesh.faces.shape == (12, 3)
