@@ -17,8 +17,8 @@ MODELS = Path(__file__).parents[1] / "data" / "models"
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo_models") / "run"
-    assert main(["demo", "--quick", "--models", str(MODELS), "--out", str(out), "--no-progress", "--seed", "1",
-                 "--preset", "seabed"]) == 0
+    # the README's command: no --preset (the demo picks the one for objects resting on a floor seen by a laser)
+    assert main(["demo", "--quick", "--models", str(MODELS), "--out", str(out), "--no-progress", "--seed", "1"]) == 0
     return out
 
 
@@ -31,9 +31,10 @@ def test_the_database_and_the_mission_are_the_users_models(run):
     assert sorted(loo["labels"]) == ["ball_valve", "elbow", "reducing_tee"]
 
 
-def test_the_users_models_are_rendered_by_the_missions_laser_with_the_preset_asked(run):
+def test_the_users_models_are_rendered_by_the_missions_laser_and_run_with_the_seabed_preset(run):
     """The database matches the sensor that looks for the parts (laser views, whole and cut by the swath's border),
-    and the run's configuration is the named preset's."""
+    and without --preset the run's configuration is the `seabed` preset's (the demo's scene: parts resting on the
+    tank's floor)."""
     from semslam.recognition import load_database
 
     ids = [str(v) for v in load_database(run / "db.npz").view_ids]
@@ -75,3 +76,23 @@ def test_a_bad_configuration_file_is_one_line_before_anything_is_written(tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.toml" in err[0] and "reject_margn" in err[0]
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+@pytest.mark.parametrize("given, config, db_sensor, expected", [
+    (None, None, None, "seabed"),                      # the README's `demo --models DIR`
+    ("default", None, None, "default"),                # --preset wins
+    (None, 'preset = "cluttered"\n', None, None),      # the file's preset wins (resolved by load_run_config)
+    (None, "[pipeline]\nreject_margin = 5.0\n", None, "seabed"),  # a file naming no preset: on top of seabed
+    (None, None, "kinect", None),                      # a Kinect database: the seabed preset is for laser views
+])
+def test_the_demo_preset_for_the_users_models(tmp_path, given, config, db_sensor, expected):
+    from semslam.demo import DemoConfig, _demo_preset
+
+    path = None
+    if config is not None:
+        path = tmp_path / "run.toml"
+        path.write_text(config)
+    cfg = DemoConfig(models_dir=str(MODELS), preset=given, config_file=None if path is None else str(path),
+                     db_sensor=db_sensor)
+    assert _demo_preset(cfg) == expected
+    assert _demo_preset(DemoConfig(preset=given, config_file=cfg.config_file)) == given  # the built-in fittings
