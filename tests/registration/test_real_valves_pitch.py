@@ -22,16 +22,6 @@ BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
 
 
-@pytest.fixture(scope="module")
-def rv():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import real_valves
-    finally:
-        sys.path.remove(str(BENCH))
-    return real_valves
-
-
 def camera_pitched_down(pitch_deg: float) -> np.ndarray:
     """Columns: the pitched camera's axes in the level camera's frame (x right, y down, z forward)."""
     p = np.radians(pitch_deg)

@@ -5,28 +5,15 @@ turn short."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from semslam.registration import UprightConfig, align_upright
 from semslam.registration.upright import _inverse_tangent_jacobian
 
 SUBSET = Path(__file__).parents[1] / "data" / "real_valves"
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
-
-
-@pytest.fixture(scope="module")
-def rv():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import real_valves
-    finally:
-        sys.path.remove(str(BENCH))
-    return real_valves
 
 
 def _matrix(res) -> np.ndarray:
