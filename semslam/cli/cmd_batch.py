@@ -54,7 +54,8 @@ def process_dive(dive: Path, out: Path, options: dict) -> None:
     run_dive(dive, out, db=load_database_arg(options["db"]), modes=tuple(options["modes"]),
              topics=options.get("topics"), vehicle=options.get("vehicle"), msg_dirs=options.get("msg_dir", ()),
              backend=options.get("backend", "ekf"), seed=options.get("seed", 0), config=rc.slam_config(),
-             pipeline_config=rc.pipeline_config(), up_from_attitude=rc.run.up_from_attitude)
+             pipeline_config=rc.pipeline_config(), up_from_attitude=rc.run.up_from_attitude,
+             keep_unreliable=rc.run.keep_unreliable)
     write_resolved_config(rc, out)  # RUN/config.toml
     if not options.get("no_report"):
         from ..report.build import build_report

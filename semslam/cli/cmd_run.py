@@ -50,6 +50,9 @@ def register(subparsers, common) -> None:
     p.add_argument("--up-from-attitude", action="store_true",
                    help="pose every scan's objects upright about the up direction of the vehicle's attitude at that "
                         "scan (classes whose database records their up: db build --fuse --up)")
+    p.add_argument("--keep-unreliable", action="store_true",
+                   help="hand the filter the detections whose pose is flagged unreliable too (border-cut parts, with "
+                        "their wide covariance; or [run] keep_unreliable in --config)")
     p.set_defaults(func=run)
 
 
@@ -76,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
                                    *args.msg_dir)) as out:
         payload = run_dive(args.dive, out, db=db, modes=modes, topics=args.topics, vehicle=args.vehicle,
                            msg_dirs=args.msg_dir, config=cfg, pipeline_config=pcfg, backend=rc.run.backend,
-                           seed=rc.run.seed, survey=survey, up_from_attitude=rc.run.up_from_attitude)
+                           seed=rc.run.seed, survey=survey, up_from_attitude=rc.run.up_from_attitude,
+                           keep_unreliable=rc.run.keep_unreliable)
         write_resolved_config(rc, out)  # RUN/config.toml: every setting, the preset named
         report = None
         if not args.no_report:

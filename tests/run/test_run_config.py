@@ -274,3 +274,35 @@ def test_cli_batch_hands_every_dive_the_resolved_config(tmp_path, monkeypatch):
     rc = RunConfig.from_dict(seen["config"])
     assert rc == load_run_config(cfg, preset="depth-camera").with_run(modes=("pose",))
     assert seen["modes"] == ["pose"] and seen["backend"] == "isam2" and seen["seed"] == 0
+
+
+@pytest.mark.parametrize("how", ["config", "flag", "neither"])
+def test_run_and_batch_hand_keep_unreliable_to_the_dive(tmp_path, monkeypatch, how):
+    """`[run] keep_unreliable = true` (or `semslam run --keep-unreliable`) reaches the runner of `semslam run` and of
+    each `semslam batch` dive: both once ignored it, while writing it into the run's config.toml."""
+    import semslam.run.dive as dive_mod
+    from semslam.cli.cmd_batch import process_dive
+    from semslam.cli.main import main
+
+    seen = []
+
+    class Captured(Exception):
+        pass
+
+    def fake_run_dive(source, out_dir, **kw):
+        seen.append(kw)
+        raise Captured
+
+    monkeypatch.setattr(dive_mod, "run_dive", fake_run_dive)
+    cfg = tmp_path / "keep.toml"
+    cfg.write_text("[run]\nkeep_unreliable = true\n" if how == "config" else "[run]\nseed = 1\n")
+    (tmp_path / "dive").mkdir()
+    args = ["run", str(tmp_path / "dive"), "--db", "builtin", "--out", str(tmp_path / "run"), "--config", str(cfg)]
+    with pytest.raises(Captured):
+        main(args + (["--keep-unreliable"] if how == "flag" else []))
+    with pytest.raises(Captured):
+        process_dive(tmp_path / "dive", tmp_path / "one", {"db": "builtin", "modes": ["dr"],
+                                                           "config": load_run_config(cfg).resolved_dict()})
+    assert seen[0]["keep_unreliable"] is (how != "neither")
+    assert seen[1]["keep_unreliable"] is (how == "config")
+    assert not (tmp_path / "run").exists()
