@@ -58,8 +58,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                         help="find objects attached to structure: in clusters too big for any class (a valve and "
                              "the pipe it is mounted on), remove the pipe (cylinders) and recognise the rest "
                              "(PipelineConfig.attached; an [attached] table in --config sets its fields)")
-    parser.add_argument("--config", help="TOML or JSON file of PipelineConfig fields (a [pipeline] table, or the "
-                                         "fields at the top); --descriptor/--classifier/--no-pose override it")
+    parser.add_argument("--config", help="a run configuration file (TOML or JSON: its preset and [pipeline] table, "
+                                         "or PipelineConfig fields at the top; docs/configuration.md); the options "
+                                         "here override it")
+    parser.add_argument("--preset", metavar="NAME", help="named settings to start from: default, cluttered, seabed, "
+                                                         "depth-camera (a --config file overrides them)")
     parser.set_defaults(func=run)
 
 
@@ -159,12 +162,12 @@ def run(args: argparse.Namespace) -> int:
     inputs = (args.scene, args.db, args.config)
     if args.out:  # say so before the work, not after it (semslam._outdir)
         check_output_file(args.out, overwrite=args.overwrite, inputs=inputs)
-    raw = {}
-    if args.config:
-        from ._inputs import read_config_file
+    raw, up_from_attitude = {}, False
+    if args.config or args.preset:  # the one configuration front door (docs/configuration.md), as run and detect
+        from ..run.config import load_run_config
 
-        raw = read_config_file(args.config)
-        raw = dict(raw.get("pipeline", raw))
+        rc = load_run_config(args.config, args.preset)
+        raw, up_from_attitude = rc.pipeline_config().to_dict(), rc.run.up_from_attitude
     if args.classifier is not None:
         raw["classifier"] = args.classifier
     if args.no_pose:
@@ -192,6 +195,9 @@ def run(args: argparse.Namespace) -> int:
         db = load_database(args.db)
     t_db = (time.perf_counter() - t0) * 1e3
     notes = []
+    if up_from_attitude and config.up_scanner is None:
+        notes.append("up_from_attitude (the configuration's [run]) is not used: one scan file has no attitude; give "
+                     "the up direction in the scan's frame with --up X,Y,Z")
     if config.up_scanner is not None:
         no_up = [c for c in db.classes if db.up_objects(c) is None]
         if no_up:

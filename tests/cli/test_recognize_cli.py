@@ -159,3 +159,19 @@ def test_recognize_pauses_the_garbage_collector_only_while_it_runs(monkeypatch, 
         assert not gc.isenabled()
     finally:
         gc.enable()
+
+
+def test_recognize_reads_the_run_configuration_file_with_its_preset(scene, cache, tmp_path, capsys):
+    """`recognize --config` is the one configuration file of `run` and `detect`: its preset is applied (it used to be
+    ignored beside a [pipeline] table, and refused alone), the preset's up from the attitude is said to be unusable
+    on one scan file, and a --preset that disagrees with the file's is a one-line error."""
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('preset = "seabed"\n[pipeline]\nreject_margin = 5.0\n')
+    assert main(["recognize", str(scene), "--db", "builtin", "--config", str(cfg), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert any("up_from_attitude" in n and "--up" in n for n in payload["notes"])
+    assert main(["recognize", str(scene), "--db", "builtin", "--preset", "seabed", "--up", "0,0,-1", "--json"]) == 0
+    assert not any("up_from_attitude" in n for n in json.loads(capsys.readouterr().out)["notes"])
+    assert main(["recognize", str(scene), "--db", "builtin", "--config", str(cfg), "--preset", "cluttered"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'seabed'" in err[0] and "'cluttered'" in err[0] and str(cfg) in err[0]
