@@ -96,3 +96,40 @@ def test_the_demo_preset_for_the_users_models(tmp_path, given, config, db_sensor
                      db_sensor=db_sensor)
     assert _demo_preset(cfg) == expected
     assert _demo_preset(DemoConfig(preset=given, config_file=cfg.config_file)) == given  # the built-in fittings
+
+
+@pytest.mark.parametrize("text, keep", [("[run]\nkeep_unreliable = true\n", True), ("[run]\nseed = 1\n", False)])
+def test_the_demo_hands_the_config_files_keep_unreliable_to_the_runner(tmp_path, monkeypatch, text, keep):
+    """`semslam demo --config F` with `[run] keep_unreliable = true`: the unreliable detections go to the filter, as
+    in `semslam run` (the demo once used only its own `use_unreliable`)."""
+    from types import SimpleNamespace
+
+    import semslam.pipeline as pipeline
+    import semslam.run as run_pkg
+    from semslam.demo import DemoConfig, _run_dive
+    from semslam.run.config import load_run_config
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    class FakeRecognizer:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def warm_up(self):
+            pass
+
+    def fake_run_stream(dive, **kwargs):
+        seen.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(pipeline, "ScanRecognizer", FakeRecognizer)
+    monkeypatch.setattr(run_pkg, "open_dive", lambda mission: mission)
+    monkeypatch.setattr(run_pkg, "run_stream", fake_run_stream)
+    f = tmp_path / "c.toml"
+    f.write_text(text)
+    with pytest.raises(Stop):
+        _run_dive(SimpleNamespace(scans=[]), None, DemoConfig(), load_run_config(f), tmp_path, False, symmetries={})
+    assert seen["keep_unreliable"] is keep
