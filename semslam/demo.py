@@ -76,8 +76,8 @@ class DemoConfig:
         descriptor and classifier are ``descriptor`` and ``classifier``.
     config_file : str, optional
         A run configuration file (``docs/configuration.md``) on top of ``preset``: its ``pipeline`` and ``slam``
-        sections, ``run.up_from_attitude`` and ``run.keep_unreliable`` are the demo's (its modes are ``modes``, its
-        seed ``seed``). Read and checked before anything is written.
+        sections, ``run.up_from_attitude``, ``run.keep_unreliable`` and ``run.backend`` are the demo's (its modes are
+        ``modes``, its seed ``seed``). Read and checked before anything is written.
     """
 
     seed: int = 0
@@ -323,7 +323,8 @@ def _run_dive(mission, db, cfg: DemoConfig, run_cfg, out: Path, progress: bool, 
         keep = cfg.use_unreliable or run_cfg.run.keep_unreliable
         found = run_stream(open_dive(mission), modes=tuple(cfg.modes), recognizer=recognizer, symmetries=symmetries,
                            seed=cfg.seed, keep_unreliable=keep, on_scan=score, lookahead=LOOKAHEAD,
-                           up_from_attitude=run_cfg.run.up_from_attitude, config=run_cfg.slam_config())
+                           up_from_attitude=run_cfg.run.up_from_attitude, config=run_cfg.slam_config(),
+                           backend=run_cfg.run.backend)
     write_detections_jsonl(out / DETECTIONS, found.detections_by_scan)
     summary = recognition_summary(records, [s["timings_ms"] for s in found.scans])
     _write_json(out / "recognition.json", {"summary": summary, "clusters": records})

@@ -98,10 +98,11 @@ def test_the_demo_preset_for_the_users_models(tmp_path, given, config, db_sensor
     assert _demo_preset(DemoConfig(preset=given, config_file=cfg.config_file)) == given  # the built-in fittings
 
 
-@pytest.mark.parametrize("text, keep", [("[run]\nkeep_unreliable = true\n", True), ("[run]\nseed = 1\n", False)])
-def test_the_demo_hands_the_config_files_keep_unreliable_to_the_runner(tmp_path, monkeypatch, text, keep):
-    """`semslam demo --config F` with `[run] keep_unreliable = true`: the unreliable detections go to the filter, as
-    in `semslam run` (the demo once used only its own `use_unreliable`)."""
+@pytest.mark.parametrize("text, keep, backend", [("[run]\nkeep_unreliable = true\nbackend = \"isam2\"\n", True, "isam2"),
+                                                ("[run]\nseed = 1\n", False, "ekf")])
+def test_the_demo_hands_the_config_files_run_options_to_the_runner(tmp_path, monkeypatch, text, keep, backend):
+    """`semslam demo --config F` with `[run] keep_unreliable = true` and a backend: the unreliable detections go to
+    the filter and the backend is the file's, as in `semslam run` (the demo once ignored both)."""
     from types import SimpleNamespace
 
     import semslam.pipeline as pipeline
@@ -132,4 +133,4 @@ def test_the_demo_hands_the_config_files_keep_unreliable_to_the_runner(tmp_path,
     f.write_text(text)
     with pytest.raises(Stop):
         _run_dive(SimpleNamespace(scans=[]), None, DemoConfig(), load_run_config(f), tmp_path, False, symmetries={})
-    assert seen["keep_unreliable"] is keep
+    assert seen["keep_unreliable"] is keep and seen["backend"] == backend
