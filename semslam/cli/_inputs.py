@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import ConfigError, InputError
+from ..errors import InputError
 
 
 def load_dataset(spec: str, vehicle: str | None = None):
@@ -35,13 +35,6 @@ def load_dataset(spec: str, vehicle: str | None = None):
         v = VehicleDescription.girona500() if vehicle == "girona500" else read_vehicle_toml(vehicle)
         ds = replace(ds, vehicle=v)
     return ds
-
-
-def read_config_file(path: str, option: str = "--config") -> dict:
-    """The table in a TOML (``.toml``) or JSON (``.json``) file, for a command's ``--config``."""
-    from .._tables import read_table
-
-    return read_table(path, f"{option} file", ConfigError)
 
 
 def add_config_options(p, what: str = "the pipeline and the filter") -> None:

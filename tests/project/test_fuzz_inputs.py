@@ -109,7 +109,7 @@ def test_vehicle_and_topic_map_files(mission_dir, tmp_path):
 def test_slam_config_and_detections_files(tmp_path):
     import json
 
-    from semslam.cli._inputs import read_config_file
+    from semslam.run.config import load_run_config
     from semslam.simulation.synthetic import square_dataset
     from semslam.simulation.detections import TruthDetectionConfig, simulate_detections
     from semslam.slam import SlamConfig
@@ -118,9 +118,8 @@ def test_slam_config_and_detections_files(tmp_path):
     c = tmp_path / "config.json"
     c.write_text(json.dumps(SlamConfig().to_dict(), indent=1))
 
-    def load_config():
-        raw = read_config_file(str(c))
-        SlamConfig.from_dict(raw.get("slam", raw), source=str(c))
+    def load_config():  # the one front door every command reads --config through
+        load_run_config(c).slam_config()
 
     assert _only_semslam_errors(load_config, c, c.read_bytes(), seed=5) > 0
     dets = simulate_detections(square_dataset(seed=1, loops=1), TruthDetectionConfig(), seed=1)
