@@ -173,7 +173,9 @@ def align_upright(source: Any, target: Any, *, up_source: Any, up_target: Any,
             spread**2 - np.radians(yaw_sigma) ** 2 if spread > np.radians(yaw_sigma) else 0.0
         )
         yaw_sigma = float(np.degrees(spread))
-    fitness, rmse, n_inliers = fwd.inliers(best["R"], best["t"])
+    # the result's fitness is the source's (forward) one: measured already for a forward answer
+    fitness, rmse, n_inliers = ((best["fitness"], best["rmse_m"], best["n_inliers"]) if best["direction"] == "forward"
+                                else fwd.inliers(best["R"], best["t"]))
     reliable = (not ambiguous) and best["fitness"] >= cfg.min_fitness
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = best["R"], best["t"]
