@@ -16,7 +16,7 @@ from ..errors import DatabaseError
 from .config import KinectConfig
 from .objects import ObjectModel
 
-__all__ = ["TIE_RATIO", "models_view_clouds", "resting_up_objects", "with_resting_up"]
+__all__ = ["TIE_RATIO", "models_view_clouds", "resting_up_objects", "whole_part_config", "with_resting_up"]
 
 #: Resting poses this close in probability (second / first) are both used for the pose-model views.
 TIE_RATIO = 0.9
@@ -27,7 +27,9 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
                        ) -> tuple[list[tuple[str, str, PointCloud]], dict[str, dict]]:
     """The view-database inputs for ``models`` (as :func:`~semslam.simulation.kinect.builtin_view_clouds`).
 
-    Each object is seen in its most probable resting pose, at azimuths ``360 * k / n_views`` degrees. With
+    Each object is seen in its most probable resting pose, at azimuths ``360 * k / n_views`` degrees, from
+    ``config``'s distance or, for a part too large to fit in the image from there, from farther
+    (:func:`whole_part_config`). With
     ``tied_rests``, an object whose second resting pose is about as probable (within :data:`TIE_RATIO`: a
     mirror-symmetric part lies on either face) is seen in both, alternately (even ``k`` in the first, odd
     ``k`` in the second, view id suffixed ``_rest1``): the pose-model views then cover both faces, which
@@ -57,25 +59,30 @@ def models_view_clouds(models: dict[str, ObjectModel], *, seed: int | np.random.
             scenes = {rest: RestScene(model if rest == 0 else
                                       dataclasses.replace(model, resting_poses=[model.resting_poses[rest]]))
                       for rest in rests}
-            mesh = scenes[rests[0]].mesh
-            radius = float(np.linalg.norm(mesh.vertices - mesh.bounds.mean(axis=0), axis=1).max())
-            if cfg.distance_m <= radius:
-                raise DatabaseError(f"The Kinect distance {cfg.distance_m:g} m must exceed the bounding radius of the "
-                                    f"class {label!r} ({radius:.3g} m). Give a larger distance (--kinect-distance, "
-                                    f"--model-distance).")
+            seen = whole_part_config(cfg, max(scene.radius_m for scene in scenes.values()))
             for k in range(n):
                 az = 2 * np.pi * k / n
                 rest = rests[k % len(rests)]
-                cloud = scenes[rest].view(az, config=cfg, seed=rng)
+                cloud = scenes[rest].view(az, config=seen, seed=rng)
                 if cloud.n_points == 0:
                     raise DatabaseError(f"The Kinect view {k} of the class {label!r} saw no point (distance "
-                                        f"{cfg.distance_m:g} m, elevation {math.degrees(cfg.elevation_rad):g} deg).")
+                                        f"{seen.distance_m:g} m, elevation {math.degrees(seen.elevation_rad):g} deg).")
                 views.append(
                     (label, f"{label}_az{round(np.degrees(az)):03d}" + (f"_rest{rest}" if rest else ""), cloud)
                 )
                 step()
             classes[label] = {"symmetry": model.symmetry, "size_xyz_m": np.array(model.size_xyz_m)}
     return views, classes
+
+
+def whole_part_config(config: KinectConfig, radius_m: float) -> KinectConfig:
+    """``config``, its camera moved back when a part of bounding radius ``radius_m`` (about the camera's target)
+    would not fit in the image: to ``radius_m / sin(half the narrower field of view)``, so that every view sees the
+    whole part (a part larger than about 0.6 m across at the pose-model views' 0.7 m). A part that fits keeps
+    ``config`` as it is (its views unchanged)."""
+    half_fov = math.atan((min(config.width_px, config.height_px) - 1) / 2 / config.focal_px)
+    needed = radius_m / math.sin(half_fov)
+    return config if config.distance_m >= needed else dataclasses.replace(config, distance_m=needed)
 
 
 def resting_up_objects(models: dict) -> dict[str, list]:

@@ -247,3 +247,22 @@ def test_a_mesh_beyond_the_size_limits_is_refused_before_it_costs_memory(tmp_pat
     monkeypatch.setattr(mesh_files, "MAX_MESH_FACES", 12)
     monkeypatch.setattr(mesh_files, "MAX_MESH_FILE_BYTES", 684)
     assert read_models(d)["box"].mesh.faces.shape == (12, 3)
+
+
+def test_a_part_too_large_for_the_image_is_seen_whole_from_farther(tmp_path):
+    """A 1.4 m part (a UXO-sized body) at the pose-model views' 0.7 m: the camera would sit inside its bounding
+    sphere. Its views are taken from farther, far enough that each sees the part from end to end."""
+    from semslam.simulation.model_views import whole_part_config
+
+    d = _box_dir(tmp_path, '[box]\nfile = "box.stl"\nunit = "m"\n', trimesh.creation.box(extents=(1.4, 0.3, 0.3)))
+    models = read_models(d)
+    cfg = KinectConfig(distance_m=0.7, elevation_rad=np.radians(60.0))
+    views, _ = models_view_clouds(models, seed=0, n_views=4, config=cfg)
+    radius = float(np.linalg.norm([0.7, 0.15, 0.15]))
+    half_fov = np.arctan(239.5 / cfg.focal_px)
+    for _, view_id, cloud in views:  # the camera aims at the box's centre, the origin of its canonical frame
+        assert np.linalg.norm(cloud.viewpoint_xyz_m) == pytest.approx(radius / np.sin(half_fov), rel=1e-6)  # float32 STL
+    broadside = [c for _, vid, c in views if vid.endswith("az090")][0]
+    assert np.ptp(broadside.points_xyz_m[:, 0]) > 1.38  # end to end (at 0.7 m it would be cut at about +-0.5 m)
+    small = KinectConfig(distance_m=0.7)
+    assert whole_part_config(small, 0.2) is small  # a part that fits keeps its views
