@@ -24,6 +24,7 @@ Usage::
     python benchmarks/real_models.py --quick --seeds 1 2 --preset seabed          # the preset chosen on seed 0
     python benchmarks/real_models.py --builtin --quick --seeds 0      # the papers' four fittings, same table
     python benchmarks/real_models.py --builtin --quick --seeds 1 2 --db-sensor laser --preset seabed
+    python benchmarks/real_models.py --folder MODELS_DIR --quick --seeds 0 1 2 --db-sensor laser --preset seabed
 
 ``--db-sensor`` / ``--preset`` / ``--config`` are the demo's (``semslam demo --db-sensor / --preset / --config``):
 the shared models' database is rendered by the mission's laser by default, the fittings' by the Kinect. Recall is
@@ -202,18 +203,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--classes", nargs="+", choices=sorted(MODELS), help="a subset of the shared models")
     ap.add_argument("--builtin", action="store_true", help="the papers' four built-in fittings instead")
     ap.add_argument("--models-dir", type=Path, default=SHARED_MODELS)
+    ap.add_argument("--folder", type=Path, default=None,
+                    help="any models folder as it is (its models.toml, as for 'semslam demo --models'): e.g. models "
+                         "nobody on the team chose settings on")
     ap.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary folder)")
     ap.add_argument("--db-sensor", choices=("laser", "kinect", "kinect+laser"), default=None,
                     help="the database's sensor (default: the demo's)")
     ap.add_argument("--preset", default=None, help="the scan pipeline's preset (default: the demo's)")
     ap.add_argument("--config", default=None, help="a run configuration file on top of the preset")
     args = ap.parse_args(argv)
-    if not args.builtin and not args.models_dir.is_dir():
+    if args.folder is not None and (args.builtin or args.classes):
+        print("real_models: --folder runs the folder's own classes (not with --builtin or --classes)", file=sys.stderr)
+        return 1
+    if args.folder is None and not args.builtin and not args.models_dir.is_dir():
         print(f"real_models: no models folder {args.models_dir} (../shared/data/models)", file=sys.stderr)
         return 1
     out = args.out or Path(tempfile.mkdtemp(prefix="semslam_real_models_"))
-    folder, used = (None, {}) if args.builtin else write_models_folder(out / "models", args.classes,
-                                                                       models_dir=args.models_dir)
+    if args.folder is not None:
+        folder, used = args.folder, {}
+    else:
+        folder, used = (None, {}) if args.builtin else write_models_folder(out / "models", args.classes,
+                                                                           models_dir=args.models_dir)
     if used:
         print("models: " + ", ".join(f"{k}={v}" for k, v in used.items()))
     per_seed, total = run_seeds(folder, args.seeds, out, quick=args.quick, db_sensor=args.db_sensor,
