@@ -73,8 +73,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "the papers used 45)",
     )
     build.add_argument("--kinect-distance", type=float, default=1.5, metavar="M",
-                       help="camera distance of the --builtin/--models views, metres (default 1.5; the papers ~0.7); farther "
-                            "for a part too large to fit in the image from there")
+                       help="camera distance of the --builtin/--models views, metres (default 1.5; the papers "
+                            "~0.7); farther for a part too large to fit in the image from there")
     _add_sensor_options(build)
     build.add_argument(
         "--model-views",
@@ -87,8 +87,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     build.add_argument("--model-elevation", type=float, default=60.0, metavar="DEG",
                        help="camera elevation of the --builtin/--models pose-model views, degrees (default 60)")
     build.add_argument("--model-distance", type=float, default=0.7, metavar="M",
-                       help="camera distance of the --builtin/--models pose-model views, metres (default 0.7); farther for a "
-                            "part too large to fit in the image from there (wider than ~0.6 m)")
+                       help="camera distance of the --builtin/--models pose-model views, metres (default 0.7); "
+                            "farther for a part too large to fit in the image from there (wider than ~0.6 m)")
     build.add_argument("--voxel", type=_length_or_auto, default=0.005, metavar="M|auto",
                        help="voxel grid applied to views and queries before the descriptors, metres, or auto "
                             "(0.9 x the views' measured point spacing); 0 disables (default 0.005, the "

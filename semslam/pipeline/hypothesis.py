@@ -225,6 +225,15 @@ def _above_floor(cfg: Any, seg: SegmentationResult | None, points: np.ndarray, m
     return admissible
 
 
+def _resting_floor(cfg: Any, seg: SegmentationResult | None, points: np.ndarray) -> tuple | None:
+    """The floor the cluster rests on for the pose search's starts (``estimate_object_pose(floor_scanner=...)``): the
+    first removed plane (the largest, the seabed) when the cluster lies on it and the floor check is on (its
+    ``verify_max_plane_penetration_m`` says objects rest on the floor); None otherwise."""
+    if cfg.verify_max_plane_penetration_m is None or seg is None or not seg.planes:
+        return None
+    return next(((n, d) for k, n, d in _supporting_planes(seg, points) if k == 0), None)
+
+
 #: Rounding allowance of :func:`within_planes`'s bound (m): a pose whose deepest point comes this close to the limit
 #: gets the exact depth.
 BOUND_SLACK_M = 1e-9
@@ -300,7 +309,8 @@ def pose_hypothesis(rec: Any, ctx: ScanContext, seg: SegmentationResult | None, 
                                 surroundings_scanner=surroundings(seg, points, model.radius_m)
                                 if cfg.pose_surroundings else None, admissible=_above_floor(cfg, seg, points, model),
                                 scene_scanner=_scene_of(seg, points) if cfg.pose_border_scene and hyp.touches_border
-                                else None, init_T_scanner_object=hyp.init_T_sensor_object)
+                                else None, init_T_scanner_object=hyp.init_T_sensor_object,
+                                floor_scanner=_resting_floor(cfg, seg, points) if up_object is not None else None)
     timings["pose"] += (time.perf_counter() - t0) * 1e3
     cov = pose.covariance_6x6
     ambiguous = pose.ambiguous  # the rule lives in registration.pose.pose_verdict

@@ -37,7 +37,7 @@ from .covariance import calibration_of, pose_covariance, widen_untrusted
 from .icp_refine import (  # noqa: F401 (_final_score, _icp_field_nearest: tests use them here)
     _final_score, _final_scores, _icp_field_nearest, _icp_small_gicp, _refine, _small_gicp_T, back_facing_shares)
 from .model import PoseConfig, PoseModel, _nearest, prepare_pose_model
-from .search import search_hypotheses
+from .search import resting_height_bands, search_hypotheses
 from .selection import admissible_alternative, choose_hypothesis, margin_and_alternatives
 
 __all__ = ["PoseConfig", "PoseEstimate", "PoseModel", "estimate_object_pose", "pose_verdict", "prepare_pose_model",
@@ -132,6 +132,7 @@ def estimate_object_pose(
     surroundings_scanner: Any = None,
     admissible: Any = None,
     scene_scanner: Any = None,
+    floor_scanner: Any = None,
 ) -> PoseEstimate:
     """Estimate ``T_scanner_object`` of a recognised object and its covariance.
 
@@ -174,17 +175,12 @@ def estimate_object_pose(
     scene_scanner : pair of array-likes (S, 3), (K, 3), optional
         The whole scan and its objects, for a border-cut cluster: the search's visibility term (not the verdict's)
         uses the scene's image, where the model beyond the border is unknown (``PipelineConfig.pose_border_scene``).
+    floor_scanner : pair (normal (3,), d), optional
+        The floor ``n . x + d = 0`` (scanner on its positive side) it rests on: see :data:`.search.MAX_FREE_STARTS`.
 
-    Returns
-    -------
-    PoseEstimate
-
-    Raises
-    ------
-    RegistrationError
-        When the cluster has fewer than ``config.min_points`` points.
-    InputError
-        On a bad ``symmetry``, cluster, viewpoint or search input, one up direction only, a model unprepared.
+    Returns a :class:`PoseEstimate`. Raises a RegistrationError when the cluster has fewer than
+    ``config.min_points`` points, an InputError on a bad ``symmetry``, cluster, viewpoint or search input, one up
+    direction only or a model unprepared.
     """
     t0 = time.perf_counter()
     model = model_points_object if isinstance(model_points_object, PoseModel) else \
@@ -194,7 +190,8 @@ def estimate_object_pose(
     cluster, vp = _checked_cluster(cluster_points_scanner, viewpoint_xyz_m, cfg)
     t1 = time.perf_counter()
     alignment = _align_cluster(cluster, vp, model, cfg, sym, seed, init_T_scanner_object, up_scanner, up_object,
-                               *checked_search_inputs(partial, surroundings_scanner, admissible, scene_scanner))
+                               *checked_search_inputs(partial, surroundings_scanner, admissible, scene_scanner,
+                                                      floor_scanner))
     return _estimate_of(cluster, model, cfg, sym, alignment, canonical_reference, t0, t1)
 
 
@@ -241,7 +238,8 @@ def _checked_cluster(
 
 def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Symmetry, seed: Any,
                    init_T_scanner_object: Any, up_scanner: Any, up_object: Any, partial: bool = False,
-                   surroundings: np.ndarray | None = None, admissible: Any = None, scene: Any = None) -> _Alignment:
+                   surroundings: np.ndarray | None = None, admissible: Any = None, scene: Any = None,
+                   floor: Any = None) -> _Alignment:
     """ICP from the prior pose when one is given, else FPFH RANSAC then ICP (``coarse_method="ransac"``), else
     the grid search with ICP of its best hypotheses (the default)."""
     nan = float("nan")
@@ -256,7 +254,7 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
         fine = _refine(cluster, model, cfg, coarse.T_target_source.matrix)
         extras = {"coarse": coarse.to_dict(), "n_voxels": n_voxels}
         return _Alignment(fine, coarse.converged, coarse.fitness, nan, nan, extras, None, t2, time.perf_counter())
-    upright = None
+    upright, ups = None, None
     if up_scanner is not None or up_object is not None:
         if up_scanner is None or up_object is None:
             raise InputError(f"{_CALLER} needs both 'up_scanner' and 'up_object' (or neither). "
@@ -268,8 +266,11 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
                              f"Got shape {np.shape(up_object)} instead.")
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
+    bands = resting_height_bands(model.hull_points, ups, cfg.partial_start_step_m) if floor is not None and \
+        ups is not None and partial else None
     fine, vis, margin, extras, t2, nearest = _grid_search(cluster, vp, model, cfg, sym, upright, partial,
-                                                          surroundings, admissible, scene)
+                                                          surroundings, admissible, scene,
+                                                          None if bands is None else (floor, bands))
     return _Alignment(fine, True, extras["coarse_fitness"], vis, margin, extras, nearest, t2, time.perf_counter())
 
 
@@ -298,7 +299,8 @@ def _estimate_of(cluster: np.ndarray, model: PoseModel, cfg: PoseConfig, sym: Sy
 
 
 def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, upright: np.ndarray | None = None,
-                 partial: bool = False, surroundings: np.ndarray | None = None, admissible=None, scene=None):
+                 partial: bool = False, surroundings: np.ndarray | None = None, admissible=None, scene=None,
+                 start_heights=None):
     """SO(3) grid search, ICP of the best distinct hypotheses, selection by the final score. Returns the final
     RegistrationResult, its visibility cost, the score margin, extras, the search's end time and the nearest
     model points of the final alignment (``(p, d, j)`` of :func:`_icp_field_nearest`, or None)."""
@@ -320,7 +322,7 @@ def _grid_search(cluster, vp, model: PoseModel, cfg: PoseConfig, sym: Symmetry, 
         n_coarse_keep=cfg.n_coarse_keep, view_centroids=model.view_centroids,
         local_steps_rad=tuple(np.radians(cfg.local_refine_steps_deg)) if model.radius_m >= cfg.local_refine_min_radius_m
         else (), camera_offset_m=cfg.camera_offset_m, partial_step_m=cfg.partial_start_step_m if partial else 0.0,
-        surroundings=surroundings, scene=scene)
+        surroundings=surroundings, scene=scene, start_heights=start_heights)
     t2 = time.perf_counter()
     field_icp = cfg.icp_backend == "field" and cfg.icp_method == "plane" and model.distance_field.index is not None
     wide = cfg.icp_wide_correspondence_m or cfg.icp_max_correspondence_m

@@ -41,6 +41,12 @@ DEPTH_TWIN_MIN_M = 0.005
 #: the default truncations (m) of :func:`search_hypotheses`'s translation-only steps, one step each
 #: (``PoseConfig.translation_steps_m``)
 TRANSLATION_STEPS_M = (0.03, 0.015, 0.008, 0.008, 0.006)
+#: A partial cluster's grid of starts (:func:`_partial_offsets`) of at most this many is searched whole. A larger one
+#: (a part larger than ~0.5 m across at 4 cm: a 1.4 m UXO body has ~2,200 starts, each aligned under every
+#: orientation, seconds per sighting) keeps, when the floor it rests on and its up are known, only the starts whose
+#: object origin lies within a band of its resting height (:func:`resting_height_bands`). Every class of the
+#: benchmarks chosen on holds fewer (at most 232: the unseen parts' anode) and is searched as before.
+MAX_FREE_STARTS = 256
 _PSI = 1.533751168755204288118041  # super-Fibonacci constant (Alexa 2022)
 
 
@@ -133,14 +139,14 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
                       min_separation_rad: float = np.radians(20.0), hierarchy: RotationHierarchy | None = None,
                       n_coarse_keep: int = 128, view_centroids: "ViewCentroids | None" = None,
                       start_separation_m: float = 0.015, local_steps_rad: tuple = (),
-                      camera_offset_m: tuple | None = None, partial_step_m: float = 0.0,
+                      camera_offset_m: tuple | None = None, partial_step_m: float = 0.0, start_heights=None,
                       surroundings: np.ndarray | None = None, scene: tuple | None = None) -> tuple[list, RangeImage]:
     """Score every orientation of ``rotations`` (``R`` of ``T_object_scanner``) and keep the ``n_keep``
     best hypotheses more than ``min_separation_rad`` apart (modulo the symmetry). The fit of ``n_coarse_points`` of
     the points ranks all orientations; the ``n_candidates`` best are aligned, fitted with all, get the visibility.
 
-    With a ``hierarchy`` over ``rotations``, the first ranking is coarse to fine: the coarse grid is ranked,
-    and only the children of its ``n_coarse_keep`` best orientations are ranked in ``rotations``.
+    With a ``hierarchy`` over ``rotations``, the first ranking is coarse to fine: the coarse grid is ranked, and only
+    the children of its ``n_coarse_keep`` best orientations are ranked in ``rotations``.
 
     ``points`` (N, 3) is the (downsampled) cluster in the scanner frame. The translation starts with the
     cluster's centroid mapped ``object_radius_m / 2`` from the object's origin towards the scanner and, given
@@ -150,25 +156,25 @@ def search_hypotheses(points: np.ndarray, viewpoint: np.ndarray, field: Distance
     3 cm: a start farther than that from the true translation is never pulled in) and the best fit is kept. The
     visible-surface starts matter for parts whose origin (bounding-box centre) is far from their surface, e.g. an
     L-shaped valve (ring and lever): there the radius rule starts ~10 cm off. ``partial_step_m`` > 0 (a cluster
-    cut by the scan's border) adds the starts of :func:`_partial_offsets` within ``object_radius_m`` of the first:
-    the part seen may lie anywhere on the object, across the view and along it; a start off the first's depth wins
-    only by :data:`PARTIAL_DEPTH_MARGIN`, and the best start of the best orientation at another depth is returned
-    last as its ``depth_twin`` (:func:`_depth_twin`) when it fits within that margin. The visibility term's range
-    image is that of ``points``, with ``surroundings`` (K, 3: the scan's other objects about the cluster) entered
-    on its grid, or :meth:`RangeImage.build_scene` of a ``scene`` (scene, occluder points; beyond the border unknown).
+    cut by the scan's border) adds the starts of :func:`_partial_offsets` within ``object_radius_m`` of the first
+    (:func:`_resting_starts` of ``start_heights``): the part seen may lie anywhere on the object; a start off the
+    first's depth wins only by :data:`PARTIAL_DEPTH_MARGIN`, and the best start of the best orientation at another
+    depth is returned last as its ``depth_twin`` (:func:`_depth_twin`) when it fits within that margin. The range
+    image of the visibility term is that of ``points`` with ``surroundings`` (K, 3: the scan's other objects about
+    the cluster), or :meth:`RangeImage.build_scene` of a ``scene`` (scene, occluders; beyond the border unknown).
 
     ``local_steps_rad`` (e.g. 8, 4 then 2 degrees; () = none): each kept hypothesis is then refined on a local
-    3 x 3 x 3 grid of rotations per step (:func:`_local_refine`), returned right after its original when it differs
-    (both are worth an ICP: on a border-cut butterfly valve the refined start scored better, its ICP ended worse).
-    """
+    3 x 3 x 3 grid of rotations per step (:func:`_local_refine`), returned after its original when it differs (both
+    are worth an ICP: on a border-cut butterfly valve the refined start scored better, its ICP ended worse)."""
     c = points.mean(axis=0)
     view = viewpoint - c
     view /= max(np.linalg.norm(view), 1e-12)
     sub = np.ascontiguousarray(points[np.linspace(0, len(points) - 1, min(len(points), n_coarse_points)).astype(int)])
     coarse_truncations, fine = (np.asarray(t, dtype=np.float64) for t in (truncations_m[:-2], truncations_m[-2:]))
 
-    starts = _TranslationStarts(field, view, c, object_radius_m, view_centroids, start_separation_m,
-                                float(tau_m), _partial_offsets(view, object_radius_m, partial_step_m))
+    starts = _TranslationStarts(field, view, c, object_radius_m, view_centroids, start_separation_m, float(tau_m),
+                                _resting_starts(_partial_offsets(view, object_radius_m, partial_step_m),
+                                                c - 0.5 * object_radius_m * view, start_heights))
     Rs = np.ascontiguousarray(rotations, dtype=np.float64)
     if hierarchy is not None and n_coarse_keep < len(hierarchy.coarse):
         Rc = np.ascontiguousarray(hierarchy.coarse, dtype=np.float64)
@@ -279,6 +285,29 @@ class _TranslationStarts:
             better = fit < bound
             best_fit[better], best_t[better] = fit[better], t[better]
         return best_fit, best_t
+
+
+def resting_height_bands(points_object: np.ndarray, ups_object: np.ndarray, step_m: float) -> np.ndarray:
+    """The heights (B, 2: low, high; m) above the floor at which the object's origin may start the search of a partial
+    cluster, one band per up direction ``ups_object`` (B, 3; object frame): the origin's height when the object rests
+    upright on the floor (its lowest point ``points_object`` on it), plus or minus two grid steps ``step_m`` (the
+    grid's layers along the view are two steps apart: at least one is kept)."""
+    ups = np.asarray(ups_object, dtype=float).reshape(-1, 3)
+    ups = ups / np.linalg.norm(ups, axis=1, keepdims=True)
+    rest = -np.min(np.asarray(points_object, dtype=float) @ ups.T, axis=0)  # the origin above the lowest point
+    return np.column_stack([rest - 2.0 * step_m, rest + 2.0 * step_m])
+
+
+def _resting_starts(offsets: np.ndarray, first_origin: np.ndarray, start_heights: tuple | None) -> np.ndarray:
+    """``offsets`` (K, 3) as they are when they are at most :data:`MAX_FREE_STARTS` or ``start_heights`` is None;
+    else those whose start puts the object's origin (``first_origin - offset``, scanner frame) at a height above the
+    floor of ``start_heights`` = ((unit normal, d), bands (B, 2)) within one of the bands, in their order."""
+    if start_heights is None or len(offsets) <= MAX_FREE_STARTS:
+        return offsets
+    (n, d), bands = start_heights
+    heights = (first_origin - offsets) @ n + d
+    keep = np.any((heights[:, None] >= bands[None, :, 0]) & (heights[:, None] <= bands[None, :, 1]), axis=1)
+    return offsets[keep]
 
 
 def _partial_offsets(view: np.ndarray, radius_m: float, step_m: float) -> np.ndarray:

@@ -63,3 +63,46 @@ def test_bad_settings_are_refused(flange):
     cloud, _, cut, up = flange
     with pytest.raises(InputError, match="'partial'"):
         estimate_object_pose(cut, prepare_pose_model(cloud), partial="yes")
+
+
+def test_a_large_part_keeps_the_starts_at_its_resting_height_above_the_floor():
+    """A 1.4 m body lying on the floor (up z, its origin 0.18 m above its lowest point), seen from 1.5 m above: of its
+    ~2,200 starts only those putting its origin within two grid steps of 0.18 m above the floor are kept, two of the
+    grid's eleven layers along the view."""
+    from semslam.pose.search import MAX_FREE_STARTS, _resting_starts, resting_height_bands
+
+    rng = np.random.default_rng(0)
+    body = rng.uniform([-0.7, -0.18, -0.18], [0.7, 0.18, 0.18], (2000, 3))
+    bands = resting_height_bands(body, np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]), 0.04)
+    np.testing.assert_allclose(bands, [[0.10, 0.26], [0.10, 0.26]], atol=2e-3)
+    view = np.array([0.0, 0.0, 1.0])  # from the cluster up to the scanner (scanner frame: z up here)
+    floor = (np.array([0.0, 0.0, 1.0]), 1.5)  # z = -1.5, the scanner on its positive side
+    first_origin = np.array([0.1, 0.0, -1.3])  # 0.2 m above the floor
+    offsets = _partial_offsets(view, 0.40, 0.04)
+    kept = _resting_starts(offsets, first_origin, (floor, bands[:1]))
+    np.testing.assert_array_equal(_resting_starts(offsets, first_origin, None), offsets)
+    heights = (first_origin - kept) @ floor[0] + floor[1]
+    assert len(offsets) > MAX_FREE_STARTS and 0.1 * len(offsets) < len(kept) < 0.3 * len(offsets)
+    assert heights.min() >= 0.10 - 1e-9 and heights.max() <= 0.26 + 1e-9
+    np.testing.assert_allclose(sorted({round(float(h), 6) for h in heights}), [0.12, 0.2])  # the layers k = 2, 0
+    outside = offsets[~np.isin(np.arange(len(offsets)), np.flatnonzero(np.isin(offsets[:, 2], kept[:, 2])))]
+    assert np.all(np.abs((first_origin - outside) @ floor[0] + floor[1] - 0.18) > 0.08)
+
+
+def test_a_bad_floor_is_refused(flange):
+    cloud, _, cut, up = flange
+    with pytest.raises(InputError, match="'floor_scanner'"):
+        estimate_object_pose(cut, prepare_pose_model(cloud), floor_scanner=([0.0, 0.0, 0.0], 1.0))
+    with pytest.raises(InputError, match="'floor_scanner'"):
+        estimate_object_pose(cut, prepare_pose_model(cloud), floor_scanner=[0.0, 0.0, 1.0])
+
+
+def test_a_part_under_the_start_budget_is_searched_the_same_with_the_floor(flange):
+    """The rim of a 32 cm flange (78 starts) finds the same pose whether the floor is given or not."""
+    cloud, T, cut, up = flange
+    model = prepare_pose_model(cloud, PoseConfig(partial_start_step_m=0.04))
+    kw = dict(symmetry=AXIS, up_scanner=up, up_object=[0.0, 0.0, 1.0], partial=True)
+    a = estimate_object_pose(cut, model, **kw).T_scanner_object.matrix
+    floor_point = T[:3, 3] - 0.5 * up  # any plane below: the budget is not exceeded, nothing is pruned
+    b = estimate_object_pose(cut, model, floor_scanner=(up, -float(up @ floor_point)), **kw).T_scanner_object.matrix
+    np.testing.assert_array_equal(a, b)
