@@ -4,7 +4,8 @@
 * ``discrete``: the object looks the same after rotating by ``2*pi/order`` about ``axis_object``
   (an elbow or a tee: order 2).
 * ``continuous``: the object is axisymmetric about ``axis_object`` (a reducing socket): rotation about that
-  axis is unobservable.
+  axis is unobservable. With ``flip=True`` it also looks the same turned end for end (a half turn about any
+  axis perpendicular to ``axis_object``): a plain cylinder, a pipe spool, a sonobuoy.
 
 Pose estimation uses it to measure errors modulo the symmetry, to canonicalise reported orientations, and
 to give an unobservable rotation a very large variance.
@@ -30,12 +31,21 @@ class Symmetry:
     kind: str = "none"
     axis_object: np.ndarray | None = None
     order: int = 1
+    #: continuous only: the object is also the same turned end for end (see the module docstring)
+    flip: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in SYMMETRY_KINDS:
             raise InputError(
                 f"The 'kind' argument of Symmetry must be one of {SYMMETRY_KINDS}. Got {self.kind!r} instead."
             )
+        if not isinstance(self.flip, (bool, np.bool_)):
+            raise InputError(f"The 'flip' argument of Symmetry must be True or False. Got {self.flip!r} instead.")
+        object.__setattr__(self, "flip", bool(self.flip))
+        if self.flip and self.kind != "continuous":
+            raise InputError(f"The 'flip' argument of Symmetry is only defined for a continuous symmetry (an "
+                             f"end-for-end turn of an axisymmetric object). Got flip=True with kind {self.kind!r} "
+                             f"instead.")
         if self.kind == "none":
             object.__setattr__(self, "axis_object", None)
             object.__setattr__(self, "order", 1)
@@ -69,12 +79,15 @@ class Symmetry:
             d["axis_object"] = self.axis_object.tolist()
         if self.kind == "discrete":
             d["order"] = self.order
+        if self.flip:
+            d["flip"] = True
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "Symmetry":
         try:
-            return cls(kind=d["kind"], axis_object=d.get("axis_object"), order=d.get("order", 1))
+            return cls(kind=d["kind"], axis_object=d.get("axis_object"), order=d.get("order", 1),
+                       flip=d.get("flip", False))
         except (KeyError, TypeError, AttributeError) as exc:
             raise InputError(f"A symmetry record must have a 'kind'. Got {d!r} instead.") from exc
 
@@ -102,6 +115,34 @@ class Symmetry:
         angles = 2.0 * np.pi * np.arange(self.order) / self.order
         return _axis_angle_matrices(self.axis_object, angles)
 
+    @property
+    def flip_rotation(self) -> np.ndarray | None:
+        """The end-for-end half turn of a flipped continuous symmetry (object frame, about :meth:`perpendicular_axis`),
+        ``None`` otherwise."""
+        if not self.flip:
+            return None
+        return _axis_angle_matrices(self.perpendicular_axis(), np.array([np.pi]))[0]
+
+    def perpendicular_axis(self) -> np.ndarray:
+        """An object-frame unit vector perpendicular to ``axis_object``, chosen deterministically (the basis
+        vector least aligned with the axis, projected); not defined for ``none``."""
+        if self.axis_object is None:
+            raise InputError("Symmetry.perpendicular_axis is not defined for the symmetry 'none' (no axis).")
+        a = self.axis_object
+        e = np.eye(3)[int(np.argmin(np.abs(a)))]
+        u = e - (e @ a) * a
+        return u / np.linalg.norm(u)
+
+    def finite_rotations(self) -> np.ndarray:
+        """The isolated (finite) part of the group, shape ``(K, 3, 3)``, identity first: the discrete group, the
+        identity and the end-for-end half turn of a flipped continuous symmetry, the identity otherwise. Combined
+        with free rotations about :attr:`unobservable_axes` it spans every equivalent orientation."""
+        if self.kind == "discrete":
+            return self.group_rotations()
+        if self.flip:
+            return np.stack([np.eye(3), self.flip_rotation])
+        return np.eye(3)[None]
+
     def rotation_error_rad(self, R_est: Any, R_true: Any) -> float:
         """Rotation error (radians, in [0, pi]) between two orientations ``R_parent_object``, modulo the symmetry.
 
@@ -109,7 +150,8 @@ class Symmetry:
         * ``discrete``: the smallest such angle over the group, ``min_k angle(R_true^T R_est S_k)``.
         * ``continuous``: the angle between the symmetry axis mapped by each rotation,
           ``acos(R_est a . R_true a)``; this equals ``min_theta angle(R_true^T R_est Exp(theta a))``, i.e. the
-          error once the unobservable rotation about the axis is ignored.
+          error once the unobservable rotation about the axis is ignored; with ``flip`` the axis's sign is
+          ignored too, ``acos(|R_est a . R_true a|)``.
         """
         from .geometry import check_rotation
 
@@ -117,7 +159,8 @@ class Symmetry:
         Rt = check_rotation("R_true", R_true, caller="Symmetry.rotation_error_rad")
         if self.kind == "continuous":
             a = self.axis_object
-            return float(np.arccos(np.clip((Re @ a) @ (Rt @ a), -1.0, 1.0)))
+            c = float((Re @ a) @ (Rt @ a))
+            return float(np.arccos(np.clip(abs(c) if self.flip else c, -1.0, 1.0)))
         M = Rt.T @ Re @ self.group_rotations()  # (order, 3, 3)
         traces = np.trace(M, axis1=1, axis2=2)
         return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
@@ -136,7 +179,8 @@ class Symmetry:
               Among ``R Exp(theta a)``, the one whose object ``u`` axis (the first object-frame basis vector
               most perpendicular to ``a``, projected onto the plane normal to ``a``) maps closest to the
               reference direction is returned. When ``R a`` is parallel to the reference, ``+x`` then
-              ``+y`` of the parent frame are used instead.
+              ``+y`` of the parent frame are used instead. With ``flip``, the end is chosen first: the one whose
+              mapped axis ``R a`` points along the first of the same directions it is not perpendicular to.
 
         Returns
         -------
@@ -160,15 +204,19 @@ class Symmetry:
             best = int(np.flatnonzero(traces >= traces.max() - 1e-12)[0])
             return cands[best]
         a = self.axis_object
-        # u: object-frame unit vector perpendicular to the axis, chosen deterministically
-        e = np.eye(3)[int(np.argmin(np.abs(a)))]
-        u = e - (e @ a) * a
-        u /= np.linalg.norm(u)
+        u = self.perpendicular_axis()
         v = np.cross(a, u)
-        a_p = R @ a
         refs = [np.array([0.0, 0.0, 1.0]) if reference is None
                 else as_float_array("reference", reference, (3,), caller="Symmetry.canonicalize"),
                 np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])]
+        if self.flip:
+            for d in refs:
+                c = float((R @ a) @ d)
+                if abs(c) > 1e-6 * max(1.0, float(np.linalg.norm(d))):
+                    if c < 0.0:
+                        R = R @ self.flip_rotation
+                    break
+        a_p = R @ a
         for d in refs:
             d_perp = d - (d @ a_p) * a_p
             if np.linalg.norm(d_perp) > 1e-6 * max(1.0, float(np.linalg.norm(d))):

@@ -317,6 +317,8 @@ def format_summary(summary: dict, path: str) -> str:
             sym_text += f" about {tuple(round(a, 3) for a in sym['axis_object'])}"
         if sym["kind"] == "discrete":
             sym_text += f", order {sym['order']}"
+        if sym.get("flip"):
+            sym_text += ", same end for end"
         size = " x ".join(f"{1000 * s:.1f}" for s in c["size_xyz_m"])
         n_model = c.get("n_model_views", 0)
         lines.append(f"| {label} | {c['n_views']} | {n_model or '(views)'} | {sym_text} | {size} |")

@@ -37,8 +37,7 @@ def evaluate_landmark(lm: LandmarkEstimate, objects, symmetry: Symmetry) -> Land
     R_est = rotation_from_rpy(*pose[3:6])
     R_true = o.T_world_object.rotation
     if symmetry.kind == "continuous":
-        a = symmetry.axis_object
-        err = float(np.arccos(np.clip((R_est @ a) @ (R_true @ a), -1, 1)))
+        err = symmetry.rotation_error_rad(R_est, R_true)
     else:
         err = float(np.linalg.norm(kern.so3_log(align_rotation(R_est, R_true, symmetry, np.zeros((0, 3))) @ R_true.T)))
     e_p = o.T_world_object.translation_m - pose[:3]

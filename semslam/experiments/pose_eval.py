@@ -108,7 +108,7 @@ def _closest_equivalent(Re: np.ndarray, Rt: np.ndarray, symmetry: Symmetry) -> n
         return symmetry.canonicalize(Rt, reference=Re)
     a = symmetry.axis_object
     angles = np.linspace(-np.pi, np.pi, 3601)
-    cands = Rt @ _axis_angle_matrices(a, angles)
+    cands = np.concatenate([Rt @ G @ _axis_angle_matrices(a, angles) for G in symmetry.finite_rotations()])
     tr = np.trace(np.einsum("ji,kjl->kil", Re, cands), axis1=1, axis2=2)
     return cands[int(np.argmax(tr))]
 

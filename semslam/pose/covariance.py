@@ -193,7 +193,8 @@ def _closest_equivalent_difference(T0: np.ndarray, Tk: np.ndarray, symmetry) -> 
     # continuous: the rotation about the axis (through the object origin) is unobservable
     a = np.asarray(symmetry.axis_object, dtype=float)
     a = a / np.linalg.norm(a)
-    best = _closest_equivalent(T0, Tk, (Rotation.from_rotvec(th * a).as_matrix()
+    best = _closest_equivalent(T0, Tk, (Rotation.from_rotvec(th * a).as_matrix() @ G
+                                        for G in symmetry.finite_rotations()
                                         for th in np.linspace(-np.pi, np.pi, 72, endpoint=False)))
     best[3:] -= (best[3:] @ a) * a
     return best

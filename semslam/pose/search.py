@@ -124,7 +124,8 @@ def pairwise_rotation_distances(R_as: np.ndarray, R_bs: np.ndarray, symmetry: Sy
     if symmetry.kind == "continuous":
         a = symmetry.axis_object
         ua, ub = np.einsum("i,kij->kj", a, R_as), np.einsum("i,kij->kj", a, R_bs)  # axes R^T a
-        return np.arccos(np.clip(ua @ ub.T, -1.0, 1.0))
+        c = ua @ ub.T
+        return np.arccos(np.clip(np.abs(c) if symmetry.flip else c, -1.0, 1.0))
     tr = np.full((len(R_as), len(R_bs)), -1.0)
     for S in symmetry.group_rotations():  # object frame: R_obj S  <=>  S^T R ; angle of S^T R_a R_b^T
         tr = np.maximum(tr, np.einsum("aij,bij->ab", np.einsum("ji,ajk->aik", S, R_as), R_bs))

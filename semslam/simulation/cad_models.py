@@ -8,7 +8,8 @@ class label::
     unit = "mm"                 # the file's unit: m, mm, cm or inch (required for STL, OBJ and PLY, which state
                                 # none; optional for COLLADA, glTF and STEP, which do, and then it overrides them)
     symmetry = "none"           # optional, default "none"; "discrete:2:z" (order 2 about the object's z axis),
-                                # "continuous:z" (axisymmetric about z); axes x, y or z of the object frame
+                                # "continuous:z" (axisymmetric about z), "continuous:z:flip" (and the same
+                                # turned end for end: a plain cylinder); axes x, y or z of the object frame
     # T_mesh_object = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # optional
 
 Formats (:data:`MESH_FORMATS`, read with trimesh): STL, OBJ and PLY; COLLADA ``.dae`` (needs ``pycollada``:
@@ -98,9 +99,11 @@ class NonWatertightMeshWarning(UserWarning):
 
 
 def parse_symmetry(text: Any, *, where: str = "The symmetry") -> Symmetry:
-    """``"none"``, ``"discrete:ORDER:AXIS"`` or ``"continuous:AXIS"`` (AXIS one of x, y, z) as a
+    """``"none"``, ``"discrete:ORDER:AXIS"``, ``"continuous:AXIS"`` or ``"continuous:AXIS:flip"`` (AXIS one of
+    x, y, z; ``flip``: also the same turned end for end, a plain cylinder) as a
     :class:`~semslam.symmetry.Symmetry`; ``where`` names the value in the error."""
-    expected = "'none', 'discrete:ORDER:AXIS' (ORDER an integer >= 2) or 'continuous:AXIS', AXIS one of x, y, z"
+    expected = ("'none', 'discrete:ORDER:AXIS' (ORDER an integer >= 2), 'continuous:AXIS' or 'continuous:AXIS:flip' "
+                "(axisymmetric and the same turned end for end), AXIS one of x, y, z")
     if not isinstance(text, str):
         raise DatabaseError(f"{where} must be a string: {expected}. Got {text!r} instead.")
     parts = [p.strip() for p in text.strip().lower().split(":")]
@@ -108,8 +111,8 @@ def parse_symmetry(text: Any, *, where: str = "The symmetry") -> Symmetry:
         return Symmetry("none")
     if len(parts) == 3 and parts[0] == "discrete" and parts[2] in _AXES and parts[1].isdigit() and int(parts[1]) >= 2:
         return Symmetry("discrete", _AXES[parts[2]], int(parts[1]))
-    if len(parts) == 2 and parts[0] == "continuous" and parts[1] in _AXES:
-        return Symmetry("continuous", _AXES[parts[1]])
+    if len(parts) in (2, 3) and parts[0] == "continuous" and parts[1] in _AXES and parts[2:] in ([], ["flip"]):
+        return Symmetry("continuous", _AXES[parts[1]], flip=len(parts) == 3)
     raise DatabaseError(f"{where} must be {expected}. Got {text!r} instead.")
 
 

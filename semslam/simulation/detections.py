@@ -155,6 +155,8 @@ def _noisy(R_so: np.ndarray, t_so: np.ndarray, label: str, sym: Symmetry, config
     R = R_so
     if sym.kind == "continuous":
         R = R @ kern.axis_rotation(sym.axis_object, rng.uniform(-np.pi, np.pi))
+        if sym.flip and rng.integers(2):
+            R = R @ sym.flip_rotation
     elif sym.kind == "discrete":
         R = R @ kern.axis_rotation(sym.axis_object, 2 * np.pi * rng.integers(sym.order) / sym.order)
     R = kern.so3_exp(rng.normal(0.0, config.rotation_sigma_rad, 3)) @ R

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from scipy.spatial import QhullError
 from scipy.spatial.transform import Rotation
 
 from .._validation import as_rng
@@ -19,8 +20,7 @@ def scan_mesh(mesh: trimesh.Trimesh, T_scanner_object: np.ndarray, *, n_target_p
     """Scanner-frame points ``(N, 3)`` of ``mesh`` (object frame) seen from the scanner origin."""
     rng = as_rng(seed)
     m = mesh.copy().apply_transform(T_scanner_object)
-    centre = m.bounding_sphere.primitive.center
-    radius = float(m.bounding_sphere.primitive.radius)
+    centre, radius = _enclosing_sphere(m)
     d = float(np.linalg.norm(centre))
     half = np.arcsin(min(radius / d, 0.99))
     # angular step so that about n_target_points rays hit (the silhouette covers ~50-70% of the square)
@@ -37,6 +37,17 @@ def scan_mesh(mesh: trimesh.Trimesh, T_scanner_object: np.ndarray, *, n_target_p
     locs, ray_idx, _ = m.ray.intersects_location(origins, dirs, multiple_hits=False)
     rng_m = np.linalg.norm(locs, axis=1) + rng.normal(0.0, range_noise_m, len(locs))
     return dirs[ray_idx] * rng_m[:, None]
+
+
+def _enclosing_sphere(mesh: trimesh.Trimesh) -> tuple[np.ndarray, float]:
+    """The minimum bounding sphere; a plain cylinder's vertices all lie on one sphere, which Qhull refuses
+    ("cospherical"): the bounding-box centre and the farthest vertex from it then."""
+    try:
+        sphere = mesh.bounding_sphere.primitive
+        return np.asarray(sphere.center, dtype=float), float(sphere.radius)
+    except QhullError:
+        centre = mesh.bounds.mean(axis=0)
+        return centre, float(np.linalg.norm(mesh.vertices - centre, axis=1).max())
 
 
 def random_pose(distance_m: float, seed=0) -> np.ndarray:

@@ -96,10 +96,7 @@ def align_rotation(R: np.ndarray, R_ref: np.ndarray, symmetry: Symmetry, axes_wo
     """The orientation equivalent to ``R`` (under ``symmetry`` and free rotations about ``axes_world``)
     closest to ``R_ref``: the joint optimum over the group elements and the free angle (each element is aligned
     about the free axis first, then the closest is kept)."""
-    cands = [R]
-    if symmetry.kind == "discrete":
-        cands = [R @ kern.axis_rotation(symmetry.axis_object, 2.0 * np.pi * k / symmetry.order)
-                 for k in range(symmetry.order)]
+    cands = [R @ S for S in symmetry.finite_rotations()]  # the discrete group, or a cylinder's end-for-end turn
     if len(axes_world) == 1:
         u = axes_world[0]
         cands = [kern.axis_rotation(u, kern.best_angle_about_axis(Rk @ R_ref.T, u)) @ Rk for Rk in cands]

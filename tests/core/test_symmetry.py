@@ -109,3 +109,63 @@ def test_to_dict_round_trip_unchanged():
     s2 = Symmetry.from_dict(s.to_dict())
     assert s2.kind == "discrete" and s2.order == 3
     np.testing.assert_allclose(s2.axis_object, [0, 0, 1])
+
+
+def _flip_oracle_error(Re, Rt, a, flip_axis):
+    """Brute force: the smallest angle of ``Rt^T Re S`` over S = Exp(theta a) F^k, k = 0, 1."""
+    thetas = np.linspace(-np.pi, np.pi, 721)
+    F = _rot(flip_axis, np.pi)
+    return min(Rotation.from_matrix(Rt.T @ Re @ _rot(a, t) @ G).magnitude() for t in thetas for G in (np.eye(3), F))
+
+
+def test_cylinder_turned_end_for_end_is_the_same_only_with_flip():
+    a = np.array([1.0, 0.0, 0.0])
+    plain, cylinder = Symmetry("continuous", a), Symmetry("continuous", a, flip=True)
+    R = _random_rotations(1, 11)[0]
+    turned = R @ _rot([0, 0, 1], np.pi)  # end for end: a half turn about an axis perpendicular to x
+    assert plain.rotation_error_rad(turned, R) == pytest.approx(np.pi, abs=1e-7)
+    assert cylinder.rotation_error_rad(turned, R) == pytest.approx(0.0, abs=1e-7)
+    # matches the brute-force minimum over the group (continuous angle x the two ends)
+    for Re, Rt in zip(_random_rotations(15, 12), _random_rotations(15, 13)):
+        brute = _flip_oracle_error(Re, Rt, a, [0, 1, 0])
+        assert cylinder.rotation_error_rad(Re, Rt) <= brute + 1e-9
+        assert cylinder.rotation_error_rad(Re, Rt) == pytest.approx(brute, abs=5e-3)
+
+
+def test_flip_rotation_reverses_the_axis_and_finite_part_lists_both_ends():
+    s = Symmetry("continuous", [0.0, 1.0, 1.0], flip=True)
+    F = s.flip_rotation
+    np.testing.assert_allclose(F @ F.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(F) == pytest.approx(1.0)
+    np.testing.assert_allclose(F @ s.axis_object, -s.axis_object, atol=1e-12)
+    assert s.perpendicular_axis() @ s.axis_object == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(s.finite_rotations(), [np.eye(3), F])
+    assert Symmetry("continuous", [0, 0, 1]).finite_rotations().shape == (1, 3, 3)
+    assert Symmetry("discrete", [0, 0, 1], 3).finite_rotations().shape == (3, 3, 3)
+    assert Symmetry("continuous", [0, 0, 1]).flip_rotation is None
+    np.testing.assert_allclose(s.unobservable_axes, [s.axis_object])  # the flip is isolated, not unobservable
+
+
+def test_canonicalize_flipped_cylinder_is_invariant_over_both_ends():
+    a = np.array([0.0, 0.0, 1.0])
+    s = Symmetry("continuous", a, flip=True)
+    for R in _random_rotations(20, 14):
+        c1 = s.canonicalize(R)
+        c2 = s.canonicalize(R @ _rot(a, 0.7) @ _rot([1, 0, 0], np.pi))
+        np.testing.assert_allclose(c1, c2, atol=1e-9)
+        assert s.rotation_error_rad(c1, R) == pytest.approx(0.0, abs=1e-6)
+        assert (c1 @ a)[2] >= 0.0  # the end chosen: the axis pointing down (the default reference, +z)
+    # a horizontal axis: the end is chosen by the next reference, +x
+    c = s.canonicalize(_rot([0, 1, 0], -np.pi / 2))  # object z -> parent -x
+    assert (c @ a)[0] == pytest.approx(1.0)
+
+
+def test_flip_is_refused_outside_a_continuous_symmetry_and_round_trips():
+    with pytest.raises(InputError, match="flip.*continuous.*'discrete'"):
+        Symmetry("discrete", [0, 0, 1], 2, flip=True)
+    with pytest.raises(InputError, match="'flip'.*True or False"):
+        Symmetry("continuous", [0, 0, 1], flip="yes")
+    s = Symmetry.from_dict(Symmetry("continuous", [0, 0, 1], flip=True).to_dict())
+    assert s.flip and s.kind == "continuous"
+    assert not Symmetry.from_dict({"kind": "continuous", "axis_object": [0, 0, 1]}).flip  # databases written before
+    assert "flip" not in Symmetry("continuous", [0, 0, 1]).to_dict()

@@ -92,6 +92,10 @@ def test_upside_down_axis_of_a_continuous_symmetry_is_pi_not_nan():
     out = evaluate_landmark(lm, objs, Symmetry("continuous", axis_object=axis))
     assert out.orientation_error_rad == pytest.approx(np.pi, abs=1e-12)
 
+    # a plain cylinder (declared with the flip) upside down is the same cylinder: no error
+    flipped = evaluate_landmark(lm, objs, Symmetry("continuous", axis_object=axis, flip=True))
+    assert flipped.orientation_error_rad == pytest.approx(0.0, abs=1e-7)
+
 
 def test_landmark_position_nees_is_the_error_truth_minus_estimate():
     """Catches a position error ``truth + estimate`` (``+`` for ``-``) in the landmark NEES: with the estimate 5 cm

@@ -224,11 +224,18 @@ def test_build_from_folder(standin, tmp_path):
         write_point_cloud(tmp_path / label / f"{view_id}.pcd", cloud)
     (tmp_path / "notes.txt").write_text("ignored")
     (tmp_path / "classes.json").write_text(json.dumps(
-        {"cylinder": {"symmetry": {"kind": "continuous", "axis_object": [0, 0, 1]}, "size_xyz_m": [0.04, 0.04, 0.12]}}))
+        {"cylinder": {"symmetry": {"kind": "continuous", "axis_object": [0, 0, 1], "flip": True},
+                      "size_xyz_m": [0.04, 0.04, 0.12]}}))
     db = build_database_from_folder(tmp_path, seed=0)
     assert db.classes == ("box", "cylinder", "sphere") and db.n_views == 6
     assert list(db.view_ids[:2]) == ["view_00", "view_01"]
-    assert db.class_info("cylinder").symmetry.kind == "continuous"
+    assert db.class_info("cylinder").symmetry.kind == "continuous" and db.class_info("cylinder").symmetry.flip
+    # a plain cylinder's end-for-end symmetry survives the file and is shown by `db info`
+    from semslam.cli.cmd_db import format_summary
+
+    saved = load_database(save_database(db, tmp_path / "saved.npz"))
+    assert saved.class_info("cylinder").symmetry.flip and not saved.class_info("box").symmetry.flip
+    assert "continuous about (0.0, 0.0, 1.0), same end for end" in format_summary(saved.summary(), "saved.npz")
     assert db.class_info("box").symmetry.kind == "none"
     box_pts = np.concatenate([c.points_xyz_m for lab, _, c in views if lab == "box"])
     np.testing.assert_allclose(db.class_info("box").size_xyz_m, box_pts.max(0) - box_pts.min(0), atol=1e-6)

@@ -95,6 +95,8 @@ BAD_TOML = [
     ('[box]\nfile = "box.stl"\nunit = "feet"\n', ("class 'box'", "'unit'", "m, mm, cm, inch", "'feet'")),
     (GOOD + 'symmetry = "discrete:1:z"\n', ("class 'box'", "'symmetry'", "'discrete:1:z'")),
     (GOOD + 'symmetry = "continuous:w"\n', ("'symmetry'", "AXIS one of x, y, z", "'continuous:w'")),
+    (GOOD + 'symmetry = "continuous:x:flop"\n', ("'symmetry'", "'continuous:AXIS:flip'", "'continuous:x:flop'")),
+    (GOOD + 'symmetry = "discrete:2:x:flip"\n', ("'symmetry'", "'discrete:2:x:flip'")),
     (GOOD + "T_mesh_object = [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n",
      ("class 'box'", "'T_mesh_object'", "rotation", "det = 2")),
     (GOOD + "T_mesh_object = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n", ("'T_mesh_object'", "4x4", "shape (3, 3)")),
@@ -142,6 +144,12 @@ def test_bad_meshes_raise(tmp_path):
         read_models(tiny)
     with pytest.raises(DatabaseError, match="The symmetry must be a string.*Got 2 instead"):
         parse_symmetry(2)
+
+
+def test_a_plain_cylinder_symmetry_is_declared_with_flip():
+    s = parse_symmetry("Continuous:Y:Flip")
+    assert s.kind == "continuous" and s.flip and s.axis_object.tolist() == [0.0, 1.0, 0.0]
+    assert not parse_symmetry("continuous:y").flip
 
 
 def test_cli_error_is_one_line(tmp_path, capsys):

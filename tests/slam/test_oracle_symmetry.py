@@ -114,6 +114,31 @@ def test_align_rotation_discrete_and_free_axis_is_jointly_closest():
         assert _angle(got, R_ref) <= best + 1e-5
 
 
+
+def test_align_rotation_of_a_cylinder_takes_the_closer_end():
+    """Catches a cylinder's end-for-end turn that is not tried (``continuous:AXIS:flip``): a sonobuoy seen the
+    other way round (its axis reversed, then a free turn about the world axis it maps to) aligns to within the
+    brute-force optimum over both ends and the free angle, which is 0 for an exact flip."""
+    rng = np.random.default_rng(13)
+    betas = np.linspace(-math.pi, math.pi, 3601)
+    for _ in range(40):
+        R_ref = _random_rotations(rng, 1)[0]
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        sym = Symmetry("continuous", axis_object=a, flip=True)
+        R = R_ref @ sym.flip_rotation @ Rotation.from_rotvec(a * rng.uniform(-3, 3)).as_matrix()
+        u = R @ a  # the free world axis of this detection
+        got = align_rotation(R, R_ref, sym, u[None])
+        assert _angle(got, R_ref) < 1e-6
+        assert _angle(align_rotation(R, R_ref, Symmetry("continuous", axis_object=a), u[None]), R_ref) > 3.0
+        R2 = _random_rotations(rng, 1)[0]
+        got = align_rotation(R2, R_ref, sym, (R2 @ a)[None])
+        Rb = Rotation.from_rotvec(np.outer(betas, R2 @ a)).as_matrix()
+        best = min(np.arccos(np.clip((np.trace(Rb @ R2 @ S @ R_ref.T, axis1=1, axis2=2) - 1) / 2, -1, 1)).min()
+                   for S in (np.eye(3), sym.flip_rotation))
+        assert _angle(got, R_ref) <= best + 1e-5
+
+
 # ------------------------------------------------------------------------------------ consensus
 def test_attitude_distance_and_quaternion_mean_hand_values():
     """Catches an attitude distance that is not ``sin^2(angle / 2)`` (or not sign invariant) and a mean that
