@@ -62,6 +62,7 @@ from .config import KinectConfig
 from .mesh_files import MESH_FORMATS, MESH_SUFFIXES, UNITS_M, ModelUnitWarning, MultiMeshSceneWarning, load_mesh
 from .mesh_files import step_length_unit_m as step_length_unit_m  # re-exported: users and tests import it from here
 from .model_views import _tied_rests as _tied_rests  # re-exported for tests/pipeline/test_up_from_attitude.py
+from .model_symmetry import ModelSymmetryWarning, check_declared_symmetry
 from .model_views import models_view_clouds
 from .model_views import resting_up_objects as resting_up_objects  # re-exported: tests import it from here
 from .model_views import with_resting_up as with_resting_up  # re-exported: benchmarks and tests import it here
@@ -72,6 +73,7 @@ __all__ = [
     "MESH_SUFFIXES",
     "MODELS_FILE",
     "UNITS_M",
+    "ModelSymmetryWarning",
     "ModelUnitWarning",
     "MultiMeshSceneWarning",
     "NonWatertightMeshWarning",
@@ -171,6 +173,9 @@ def read_models(models_dir: str | Path) -> dict[str, ObjectModel]:
     -----
     NonWatertightMeshWarning
         For a mesh with holes (its views still render).
+    ModelSymmetryWarning
+        When the declared ``symmetry`` and the mesh clearly disagree
+        (:func:`~semslam.simulation.model_symmetry.check_declared_symmetry`).
     """
     root = Path(models_dir)
     if root.is_file() and root.suffix.lower() == ".toml":  # the models file itself
@@ -230,6 +235,9 @@ def read_models(models_dir: str | Path) -> dict[str, ObjectModel]:
             models[label] = _stable_rest_order(make_object(label, mesh, symmetry, centre=T_mesh_object is None))
         except SemslamError as exc:
             raise DatabaseError(f"{where}: {exc}") from None
+        disagreement = check_declared_symmetry(models[label].mesh, symmetry)
+        if disagreement:
+            warnings.warn(f"{where}: {disagreement}", ModelSymmetryWarning, stacklevel=2)
     return models
 
 
