@@ -52,15 +52,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_MODELS = ROOT.parent / "shared" / "data" / "models"
 
-#: class -> (file, unit, symmetry); same part in another format: (class, file, unit) tried as a separate class
+#: class -> (file, unit, symmetry); same part in another format: (class, file, unit) tried as a separate class.
+#: The symmetries are the meshes' own (semslam.simulation.model_symmetry measures every one as declared here); until
+#: 2026-12-07 the wheel valve was declared "none" (its handwheel has five spokes) and the panel base "continuous:x"
+#: (it is also the same end for end, which could not be declared before).
 MODELS = {
-    "wheel_valve": ("wheel_valve.stl", "m", "none"),
+    "wheel_valve": ("wheel_valve.stl", "m", "discrete:5:x"),
     "hand_wheel_valve": ("hand_wheel_valve.stl", "m", "discrete:8:y"),
     "wetmate_receptacle": ("wetmate_receptacle.stl", "m", "continuous:z"),
     "blind_flange": ("blind_flange_4in_cl150.stl", "m", "discrete:8:z"),
     "slipon_flange": ("slipon_flange_6in_cl300.stl", "m", "discrete:12:z"),
     "tac_valve_front": ("tac_valve_front.obj", "m", "discrete:4:x"),
-    "tac_valve_base": ("tac_valve_base.obj", "m", "continuous:x"),
+    "tac_valve_base": ("tac_valve_base.obj", "m", "continuous:x:flip"),
 }
 #: other formats of parts above (used instead of the STL when they load here)
 ALTERNATIVE_FORMATS = {
