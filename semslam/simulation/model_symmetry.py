@@ -9,8 +9,8 @@ far they land from the surface: the 99th percentile of the nearest-sample distan
 the unturned samples (the sampling floor), as a fraction of the bounding-box diagonal (the *excess*). A turn is a
 symmetry when its excess is below :data:`HOLDS_EXCESS` (measured: 0.000-0.0022 for every symmetry declared on the
 shared, catalogue, unseen and DAVE models, 0.008 for the small handwheel valve's 8 spokes around a square stem),
-and clearly not one above :data:`BROKEN_EXCESS` (0.016-0.37 for turns that are not symmetries; 0.006-0.007 for a
-flange turned face for face, whose raised face is 2-3 mm).
+and clearly not one above :data:`BROKEN_EXCESS` (0.016 and more for turns that are not symmetries, measured up to
+:data:`CAP_EXCESS`; 0.006-0.007 for a flange turned face for face, whose raised face is 2-3 mm).
 """
 
 from __future__ import annotations
@@ -81,25 +81,37 @@ def symmetry_text(symmetry: Symmetry) -> str:
     return f"continuous:{axis}" + (":flip" if symmetry.flip else "")
 
 
+def _candidates() -> list[tuple[int, Symmetry]]:
+    """Every symmetry looked for, with its rank (lower: stronger) about its axis."""
+    out = []
+    for a in _AXES.values():
+        cands = [Symmetry("continuous", a, flip=True), Symmetry("continuous", a)]
+        out += list(enumerate(cands + [Symmetry("discrete", a, n) for n in ORDERS]))
+    return out
+
+
+def _group_excess(mesh: trimesh.Trimesh, symmetries: list[Symmetry], seed: int) -> list[float]:
+    """The largest excess of each symmetry's generators, from one sampling of the mesh."""
+    gens = [_generators(s) for s in symmetries]
+    excess = turn_excess(mesh, np.concatenate(gens), seed=seed)
+    bounds = np.cumsum([0] + [len(g) for g in gens])
+    return [float(excess[a:b].max()) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _strongest(candidates: list[tuple[int, Symmetry]], excess: list[float]) -> tuple[Symmetry, float]:
+    best = None
+    for (rank, s), e in zip(candidates, excess):
+        if e < HOLDS_EXCESS and (best is None or rank < best[0]):
+            best = (rank, s, e)
+    return (best[1], best[2]) if best is not None else (Symmetry("none"), 0.0)
+
+
 def measured_symmetry(mesh: trimesh.Trimesh, *, seed: int = 0) -> tuple[Symmetry, float]:
     """The strongest symmetry about one of the object's axes that ``mesh`` has (continuous with an end-for-end
     turn, then continuous, then the largest discrete order; ties go to x, y, z in turn), and its largest excess;
     ``(Symmetry("none"), 0.0)`` when no turn holds."""
-    candidates = []
-    for name, a in _AXES.items():
-        cands = [Symmetry("continuous", a, flip=True), Symmetry("continuous", a)]
-        cands += [Symmetry("discrete", a, n) for n in ORDERS]
-        candidates += [(rank, name, s) for rank, s in enumerate(cands)]
-    gens = [_generators(s) for _, _, s in candidates]
-    excess = turn_excess(mesh, np.concatenate(gens), seed=seed)
-    best = None
-    start = 0
-    for (rank, _, s), g in zip(candidates, gens):
-        e = float(excess[start:start + len(g)].max())
-        start += len(g)
-        if e < HOLDS_EXCESS and (best is None or rank < best[0]):
-            best = (rank, s, e)
-    return (best[1], best[2]) if best is not None else (Symmetry("none"), 0.0)
+    candidates = _candidates()
+    return _strongest(candidates, _group_excess(mesh, [s for _, s in candidates], seed))
 
 
 def _weaker(declared: Symmetry, found: Symmetry) -> bool:
@@ -120,20 +132,20 @@ def check_declared_symmetry(mesh: trimesh.Trimesh, declared: Symmetry, *, seed: 
     the declared symmetry does not hold (its turn's excess above :data:`BROKEN_EXCESS`), or the mesh has a
     stronger one about the same axis, or any when ``none`` is declared (excess below :data:`HOLDS_EXCESS`)."""
     diagonal_mm = 1000.0 * float(np.linalg.norm(np.ptp(mesh.bounds, axis=0)))
-    if declared.kind != "none":
-        excess = float(turn_excess(mesh, _generators(declared), seed=seed).max())
-        if excess > BROKEN_EXCESS:
-            found, _ = measured_symmetry(mesh, seed=seed)
-            hint = f" (its mesh measures as {symmetry_text(found)!r})" if found.kind != "none" else ""
-            return (f"the declared symmetry {symmetry_text(declared)!r} does not hold for its mesh: its turn moves "
-                    f"1 % of the surface by {excess * diagonal_mm:.3g} mm or more ({100 * excess:.2g} % of the part's "
-                    f"size); a symmetry the part does not have hides real pose errors. Declare the one it has"
-                    f"{hint}.")
-    found, excess = measured_symmetry(mesh, seed=seed)
+    candidates = _candidates()
+    checked = [declared] if declared.kind != "none" else []
+    excess = _group_excess(mesh, checked + [s for _, s in candidates], seed)
+    found, found_excess = _strongest(candidates, excess[len(checked):])
+    if checked and excess[0] > BROKEN_EXCESS:
+        hint = f" (its mesh measures as {symmetry_text(found)!r})" if found.kind != "none" else ""
+        return (f"the declared symmetry {symmetry_text(declared)!r} does not hold for its mesh: its turn moves "
+                f"1 % of the surface by {excess[0] * diagonal_mm:.3g} mm or more ({100 * excess[0]:.2g} % of the "
+                f"part's size); a symmetry the part does not have hides real pose errors. Declare the one it has"
+                f"{hint}.")
     if _weaker(declared, found):
         return (f"its mesh is the same turned as {symmetry_text(found)!r} describes (within "
-                f"{max(excess * diagonal_mm, 0.01):.2g} mm), but {symmetry_text(declared)!r} is declared: its twin "
-                f"poses will be flagged ambiguous, never mapped, and counted as wrong. Declare "
+                f"{max(found_excess * diagonal_mm, 0.01):.2g} mm), but {symmetry_text(declared)!r} is declared: its "
+                f"twin poses will be flagged ambiguous, never mapped, and counted as wrong. Declare "
                 f"symmetry = {symmetry_text(found)!r} if the part is symmetric (a mark the mesh lacks may tell the "
                 f"twins apart).")
     return None
