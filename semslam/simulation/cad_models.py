@@ -62,7 +62,7 @@ from .config import KinectConfig
 from .mesh_files import MESH_FORMATS, MESH_SUFFIXES, UNITS_M, ModelUnitWarning, MultiMeshSceneWarning, load_mesh
 from .mesh_files import step_length_unit_m as step_length_unit_m  # re-exported: users and tests import it from here
 from .model_views import _tied_rests as _tied_rests  # re-exported for tests/pipeline/test_up_from_attitude.py
-from .model_symmetry import ModelSymmetryWarning, check_declared_symmetry
+from .model_symmetry import OBJECT_AXES, ModelSymmetryWarning, check_declared_symmetry
 from .model_views import models_view_clouds
 from .model_views import resting_up_objects as resting_up_objects  # re-exported: tests import it from here
 from .model_views import with_resting_up as with_resting_up  # re-exported: benchmarks and tests import it here
@@ -93,7 +93,7 @@ MIN_DIAGONAL_M, MAX_DIAGONAL_M = 0.005, 20.0
 ROTATION_TOL = 1e-3
 
 
-_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+_AXES = OBJECT_AXES
 
 
 class NonWatertightMeshWarning(UserWarning):

@@ -34,7 +34,8 @@ CAP_EXCESS = 0.05
 CONTINUOUS_TEST_ANGLES = (0.37, 1.23, 2.71)
 #: Orders of discrete symmetry looked for, largest first.
 ORDERS = (12, 10, 8, 6, 5, 4, 3, 2)
-_AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
+#: The object axes a ``models.toml`` symmetry names (``parse_symmetry`` reads them, :func:`symmetry_text` writes them).
+OBJECT_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
 class ModelSymmetryWarning(UserWarning):
@@ -74,7 +75,7 @@ def symmetry_text(symmetry: Symmetry) -> str:
     if symmetry.kind == "none":
         return "none"
     a = symmetry.axis_object
-    names = [n for n, v in _AXES.items() if np.allclose(a, v, atol=1e-9)]
+    names = [n for n, v in OBJECT_AXES.items() if np.allclose(a, v, atol=1e-9)]
     axis = names[0] if names else "(" + ", ".join(f"{v:.3g}" for v in a) + ")"
     if symmetry.kind == "discrete":
         return f"discrete:{symmetry.order}:{axis}"
@@ -84,7 +85,7 @@ def symmetry_text(symmetry: Symmetry) -> str:
 def _candidates() -> list[tuple[int, Symmetry]]:
     """Every symmetry looked for, with its rank (lower: stronger) about its axis."""
     out = []
-    for a in _AXES.values():
+    for a in OBJECT_AXES.values():
         cands = [Symmetry("continuous", a, flip=True), Symmetry("continuous", a)]
         out += list(enumerate(cands + [Symmetry("discrete", a, n) for n in ORDERS]))
     return out

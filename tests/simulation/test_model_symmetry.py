@@ -115,3 +115,8 @@ def test_db_build_prints_the_disagreement_as_one_warning_line(tmp_path, capsys):
                  "--model-views", "0", "--kinect-distance", "3"]) == 0
     err = [line for line in capsys.readouterr().err.splitlines() if "symmetry" in line or "turned" in line]
     assert len(err) == 1 and err[0].startswith("semslam: warning: The class 'rod'") and "'continuous:z:flip'" in err[0]
+
+
+@pytest.mark.parametrize("text", ["none", "discrete:5:x", "discrete:12:z", "continuous:y", "continuous:z:flip"])
+def test_the_warning_spells_symmetries_as_models_toml_reads_them(text):
+    assert symmetry_text(parse_symmetry(text)) == text
