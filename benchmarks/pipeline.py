@@ -172,12 +172,12 @@ def main() -> int:
         write_point_cloud(scan_path, mission.load_scan(busiest), encoding="binary_compressed")
         cold = subprocess.run([sys.executable, "-c", (
             "import time; t0=time.perf_counter();"
-            "from semslam.pipeline import ScanRecognizer; from semslam.recognition import load_database;"
+            "from semslam.pipeline import PipelineConfig, ScanRecognizer; from semslam.pose import PoseConfig;"
+            "from semslam.recognition import load_database;"
             "from semslam.io import read_point_cloud; t1=time.perf_counter();"
             f"db=load_database({str(db_path)!r});"
             f"s=read_point_cloud({str(scan_path)!r}); t2=time.perf_counter();"
-            f"r=ScanRecognizer(db, __import__('semslam.pipeline').pipeline.PipelineConfig("
-            f"pose=__import__('semslam.registration').registration.PoseConfig(**{overrides!r})));"
+            f"r=ScanRecognizer(db, PipelineConfig(pose=PoseConfig(**{overrides!r})));"
             "res=r.recognize(s, seed=0); t3=time.perf_counter();"
             "print(f'{(t1-t0)*1e3:.0f} {(t3-t2)*1e3:.0f} {len(res.detections)}')")],
             capture_output=True, text=True, cwd=ROOT)

@@ -240,8 +240,8 @@ def slide_profile_covariance(points_target: np.ndarray, distances_at, directions
     points (the inliers of the estimate; every ``N // max_points``-th of them) are shifted by ``t d``. A shift
     "keeps" the points when it loses at most ``max(allowed_min, allowed_fraction * N)`` of them to "no model point
     within ``tau_m``" (``distances_at(q)``: distances of points ``q`` to the nearest model point, inf beyond
-    ``tau_m``). On each side, ``t`` doubles from ``step_m`` while shifts keep the points (up to ``max_shift_m``),
-    then the edge is bisected to ``step_m``. The edges kept, less ``tau_m`` (a point moved less than ``tau_m`` off
+    ``tau_m``). On each side, ``t - tau_m`` doubles from ``step_m`` while shifts keep the points (up to
+    ``max_shift_m``), then the edge is bisected to ``step_m`` (a well-constrained direction costs one test a side). The edges kept, less ``tau_m`` (a point moved less than ``tau_m`` off
     the surface's end still finds a model point), bound an interval ``[a, b]``; the truth is taken as uniform on
     it and the direction's variance is the second moment about the estimate, ``(a^2 + a b + b^2) / 3``: an
     estimate at one end of a flat valley gets the valley's width, a well-constrained direction about 0 (the
@@ -258,9 +258,10 @@ def slide_profile_covariance(points_target: np.ndarray, distances_at, directions
     for d in np.asarray(directions, dtype=float).reshape(-1, 3):
         ends = []
         for sign in (1.0, -1.0):
-            kept, t = 0.0, step_m
+            # a shift within tau_m loses no point on a surface that goes on: the first test is one step beyond
+            kept, t = tau_m, tau_m + step_m
             while t <= max_shift_m and keeps(sign * t * d):
-                kept, t = t, 2.0 * t
+                kept, t = t, tau_m + 2.0 * (t - tau_m)
             lost = min(t, max_shift_m + step_m)
             while lost - kept > step_m:  # the edge between a kept and a lost shift
                 mid = 0.5 * (kept + lost)
@@ -345,7 +346,7 @@ AMBIGUOUS_ROTATION_VARIANCE_RAD2 = float(np.pi ** 2 / 3.0)
 
 
 def calibration_of(config) -> CovarianceCalibration:
-    """The :class:`CovarianceCalibration` of a :class:`~semslam.registration.PoseConfig` (its
+    """The :class:`CovarianceCalibration` of a :class:`~semslam.pose.PoseConfig` (its
     ``covariance_inflation`` is the scale, ``min_sigma_translation_m`` / ``min_sigma_rotation_rad`` the floors)."""
     return CovarianceCalibration(scale=float(config.covariance_inflation),
                                  floor_translation_m=float(config.min_sigma_translation_m),
