@@ -241,11 +241,11 @@ def slide_profile_covariance(points_target: np.ndarray, distances_at, directions
     "keeps" the points when it loses at most ``max(allowed_min, allowed_fraction * N)`` of them to "no model point
     within ``tau_m``" (``distances_at(q)``: distances of points ``q`` to the nearest model point, inf beyond
     ``tau_m``). On each side, ``t - tau_m`` doubles from ``step_m`` while shifts keep the points (up to
-    ``max_shift_m``), then the edge is bisected to ``step_m`` (a well-constrained direction costs one test a side). The edges kept, less ``tau_m`` (a point moved less than ``tau_m`` off
-    the surface's end still finds a model point), bound an interval ``[a, b]``; the truth is taken as uniform on
-    it and the direction's variance is the second moment about the estimate, ``(a^2 + a b + b^2) / 3``: an
-    estimate at one end of a flat valley gets the valley's width, a well-constrained direction about 0 (the
-    Hessian's variance then stands).
+    ``max_shift_m``), then the edge is bisected to ``step_m`` (a well-constrained direction costs one test a side).
+    The edges kept, less ``tau_m`` (a point moved less than ``tau_m`` off the surface's end still finds a model
+    point), bound an interval ``[a, b]``; the truth is taken as uniform on it and the direction's variance is the
+    second moment about the estimate, ``(a^2 + a b + b^2) / 3``: an estimate at one end of a flat valley gets the
+    valley's width, a well-constrained direction about 0 (the Hessian's variance then stands).
     """
     pts = np.asarray(points_target, dtype=float)
     pts = pts[:: max(len(pts) // max_points, 1)]

@@ -100,7 +100,9 @@ def test_the_twin_is_never_chosen_but_the_covariance_covers_it(plate, monkeypatc
     _lifted_first(monkeypatch, with_twin=False)
     alone = estimate_object_pose(pts, model, partial=True)
     nees_alone, err = _nees3(alone, T)
-    assert err @ view > 0.008 and nees_alone > 50.0  # lifted, and confident about it
+    # lifted, and confident about it (NEES 33: the slide profile sees the plate's two faces 13 mm apart but takes
+    # off the 6 mm a point can move unseen; 159 without it)
+    assert err @ view > 0.008 and nees_alone > 20.0
     _lifted_first(monkeypatch, with_twin=True)
     est = estimate_object_pose(pts, model, partial=True)
     nees, err_twin = _nees3(est, T)
