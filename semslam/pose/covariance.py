@@ -275,16 +275,16 @@ def slide_profile_covariance(points_target: np.ndarray, distances_at, directions
 def pose_covariance(points_target: np.ndarray, distances_m: np.ndarray, rows: np.ndarray, model_points: np.ndarray,
                     model_normals: np.ndarray, T_target_source: np.ndarray, symmetry, *, canonical_reference=None,
                     alternatives=(), calibration: CovarianceCalibration | None = None,
-                    unobservable_variance_rad2: float = 1e4, nearest=None,
+                    unobservable_variance_rad2: float = 1e4, distances_at=None,
                     extent_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, dict]:
     """The xyz-rpy covariance (6x6) of the canonicalised ``T_source_target`` (for a pose: ``T_scanner_object``).
 
     ``points_target`` (N, 3): the source points aligned by ``T_target_source``; ``distances_m`` (N,) to their
     nearest model point (``inf`` beyond the correspondence distance), ``rows`` (N,) that point's row of
     ``model_points`` / ``model_normals``. ``alternatives``: the search's other refined hypotheses
-    (``(score_delta, T_target_source_k)``). ``nearest``: ``q -> (distances, rows)`` of points ``q`` (as
-    ``distances_m`` and ``rows``) for the slide profile (:func:`slide_profile_covariance`, shifts up to ``extent_m``,
-    the model's radius); None leaves it out. See :class:`CovarianceCalibration` for the terms.
+    (``(score_delta, T_target_source_k)``). ``distances_at``: ``q -> distances`` of points ``q`` to their nearest
+    model point (as ``distances_m``) for the slide profile (:func:`slide_profile_covariance`, shifts up to twice
+    ``extent_m``, the model's radius); None leaves it out. See :class:`CovarianceCalibration` for the terms.
 
     Returns ``(cov, T_source_target_canonical, diagnostics)``; ``diagnostics`` has ``sigma2_m2``, ``n_inliers``,
     ``n_effective`` and ``alternatives_weight``.
@@ -315,8 +315,8 @@ def pose_covariance(points_target: np.ndarray, distances_m: np.ndarray, rows: np
                            unobservable_variance_rad2=unobservable_variance_rad2)
     C[:3, :3] += cal.floor_translation_m ** 2 * np.eye(3)
     C[3:, 3:] += rotation_floor_rad(p_in, cal) ** 2 * np.eye(3)
-    if nearest is not None and cal.slide_step_m > 0:
-        C[:3, :3] = _with_slide_profile(C[:3, :3], S, points_target[ok], info[:3, :3], nearest, cal=cal,
+    if distances_at is not None and cal.slide_step_m > 0:
+        C[:3, :3] = _with_slide_profile(C[:3, :3], S, points_target[ok], info[:3, :3], distances_at, cal=cal,
                                         extent_m=extent_m)
     spread, wsum = hypothesis_spread(T_os, alternatives, symmetry, cal.hypothesis_score_scale)
     C = C + B @ spread @ B.T
@@ -324,13 +324,13 @@ def pose_covariance(points_target: np.ndarray, distances_m: np.ndarray, rows: np
     return xyz_rpy_covariance_of_inverse(np.linalg.inv(T_so_can), C), T_so_can, diag
 
 
-def _with_slide_profile(C_t: np.ndarray, S: np.ndarray, points: np.ndarray, info_t: np.ndarray, nearest, *,
+def _with_slide_profile(C_t: np.ndarray, S: np.ndarray, points: np.ndarray, info_t: np.ndarray, distances_at, *,
                         cal: CovarianceCalibration, extent_m: float) -> np.ndarray:
     """``C_t`` (3x3, canonical target frame) raised along each principal direction of the translation information
     ``info_t`` (target frame) to at least the slide profile's variance (:func:`slide_profile_covariance`)."""
     directions = np.linalg.eigh(0.5 * (info_t + info_t.T))[1].T
     step = max(cal.slide_step_m, extent_m / 64.0)
-    Cs = slide_profile_covariance(points, lambda q: nearest(q)[0], directions, tau_m=cal.slide_tau_m, step_m=step,
+    Cs = slide_profile_covariance(points, distances_at, directions, tau_m=cal.slide_tau_m, step_m=step,
                                   max_shift_m=max(2.0 * extent_m, step))
     w, V = np.linalg.eigh(S.T @ Cs @ S)
     C = np.array(C_t, dtype=float, copy=True)

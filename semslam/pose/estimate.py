@@ -405,7 +405,7 @@ def _covariance(cluster, model: PoseModel, cfg: PoseConfig, sym: Symmetry, T_os:
     cov, T_so_can, diag = pose_covariance(p, d, j, model.icp_target.points_xyz_m, model.normals_object, T_os, sym,
                                           canonical_reference=canonical_reference, alternatives=alternatives,
                                           calibration=cal, unobservable_variance_rad2=cfg.unobservable_variance_rad2,
-                                          nearest=lambda q: _nearest(model, q, cfg.icp_max_correspondence_m),
+                                          distances_at=lambda q: _nearest(model, q, cfg.icp_max_correspondence_m)[0],
                                           extent_m=model.radius_m)
     return (cov, T_so_can), diag["sigma2_m2"]
 
