@@ -63,7 +63,8 @@ class PoseConfig:
     #: where the whole view's centroid would be, beyond the 3 cm that the translation steps pull in. 0 (default):
     #: the centroid rules only. 0.04 m found the shared slip-on flange's border strips (fitness 0.62-0.88 -> 1.0,
     #: within 4 mm) and, along the view, the valve panel front's (a ring on its rim, its lower arc ~10 cm behind
-    #: the first start; benchmarks/history/real-models.md).
+    #: the first start; benchmarks/history/real-models.md). A whole cluster whose search ends unaligned (fitness
+    #: below ``min_fitness``) is searched again from the grid (DAVE's tilted hard hat, session 38).
     partial_start_step_m: float = 0.0
     #: Coarse-to-fine ranking: a grid of ``n_coarse_rotations`` is ranked first, and only the fine-grid
     #: children of its ``n_coarse_keep`` best orientations are ranked next (0 = rank the whole fine grid).

@@ -44,7 +44,8 @@ def test_a_border_cut_rim_is_found_with_the_grid_of_starts_and_not_without(flang
 
 
 def test_the_grid_is_off_by_default_and_for_whole_clusters(flange):
-    """Catches the grid run where it was not asked for (a whole cluster, or the default configuration)."""
+    """Catches the grid run where it was not asked for (a whole cluster whose search ends aligned, or the default
+    configuration; an unaligned whole cluster is searched again: test_pose_search_again.py)."""
     a = _estimate(flange, 0.0, True)[0].T_scanner_object.matrix
     b = _estimate(flange, 0.0, False)[0].T_scanner_object.matrix
     c = _estimate(flange, 0.04, False)[0].T_scanner_object.matrix
