@@ -267,10 +267,11 @@ def _align_cluster(cluster: np.ndarray, vp: np.ndarray, model: PoseModel, cfg: P
                              f"Got shape {np.shape(up_object)} instead.")
         # several possible ups (a part that rests on either face): the orientations keeping any of them up
         upright = np.concatenate([upright_rotations(up_scanner, u, caller=_CALLER) for u in ups])
-    bands = resting_height_bands(model.hull_points, ups, cfg.partial_start_step_m) if floor is not None and \
-        ups is not None else None
-    search = lambda part: _grid_search(cluster, vp, model, cfg, sym, upright, part, surroundings,  # noqa: E731
-                                       admissible, scene, None if bands is None or not part else (floor, bands))
+    def search(part: bool):
+        heights = (floor, resting_height_bands(model.hull_points, ups, cfg.partial_start_step_m)) if part and \
+            floor is not None and ups is not None else None
+        return _grid_search(cluster, vp, model, cfg, sym, upright, part, surroundings, admissible, scene, heights)
+
     found = search(partial)
     if not partial and cfg.partial_start_step_m > 0 and found[0].fitness < cfg.min_fitness:
         # a whole cluster whose centroid starts all lie beyond the steps' 3 cm pull-in (a tilted hard hat's seen
