@@ -27,6 +27,8 @@ from typing import Callable
 
 import numpy as np
 
+from ._signals import remove_on_interrupt
+
 __all__ = ["CacheLimitWarning", "cache_dir", "cache_limit_bytes", "cached_arrays", "key_digest"]
 
 DEFAULT_LIMIT_MB = 2048.0
@@ -83,6 +85,7 @@ def cached_arrays(kind: str, key: list, build: Callable[[], dict]) -> dict:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
+        remove_on_interrupt(tmp)
         try:
             with os.fdopen(fd, "wb") as f:
                 np.savez(f, **arrays)

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator
 
-from ._signals import raise_if_interrupted
+from ._signals import raise_if_interrupted, remove_on_interrupt
 from .errors import InputError
 
 MARKER = ".semslam-run"
@@ -178,7 +178,10 @@ def staging_dir(path: str | os.PathLike, what: str = "tmp") -> Path:
     caller removes it (and only it)."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{out.name}.semslam-{os.getpid()}-", suffix=f".{what}", dir=out.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.semslam-{os.getpid()}-", suffix=f".{what}", dir=out.parent))
+    if what != "old":  # (an "old" folder holds the earlier output during a swap: never removed by the watchdog)
+        remove_on_interrupt(tmp)
+    return tmp
 
 
 def _umask() -> int:

@@ -16,18 +16,39 @@ BaseException``. The command then runs to its end. So the handler also records e
 by :mod:`semslam._outdir` just before it swaps a staged output in): an interrupted command never leaves a result
 behind, however the interrupt was lost (measured: a CI run's ``semslam simulate`` interrupted 2 s after its start
 wrote its whole mission and exited 130).
+
+**A Ctrl-C that never ends the command.** Whatever the cause (a library that swallows every interrupt and loops, a
+lock a half-finished import left held while the unwinding waits for a worker thread that needs it: measured once, a
+CI run's ``semslam run`` interrupted 0.3 s after its start still running 300 s later), the user's Ctrl-C must end
+the command. :func:`start_watchdog` (the ``semslam`` command calls it) starts a thread that Python's C-level signal
+handler wakes (:func:`signal.set_wakeup_fd`: it is written even while the main thread is stuck in native code); if
+the process still runs :data:`INTERRUPT_GRACE_S` after a Ctrl-C taken by the command's own handler, the thread
+removes the staging folders and temporary files this process made (:func:`remove_on_interrupt`: never an earlier
+output moved aside during a swap), writes ``semslam: interrupted`` and ends the process with status 130. A command
+that took SIGINT over (the ROS node: a Ctrl-C is its normal end, then it writes its run) is not ended.
 """
 
 from __future__ import annotations
 
+import os
+import select
+import shutil
+import signal
 import threading
+import time
 from contextlib import contextmanager
 from typing import Iterator
 
 __all__ = ["critical", "defer_interrupt", "note_interrupt", "interrupt_seen", "raise_if_interrupted",
-           "forget_interrupts"]
+           "forget_interrupts", "start_watchdog", "remove_on_interrupt", "note_reported", "INTERRUPT_GRACE_S"]
 
-_state = {"depth": 0, "pending": False, "seen": False}
+#: seconds a command has, after a Ctrl-C, to end by itself before the watchdog ends it (the unwinding waits for the
+#: scans in recognition: a few seconds)
+INTERRUPT_GRACE_S = 20.0
+
+_state = {"depth": 0, "pending": False, "seen": False, "reported": False}
+#: staging folders and temporary files of this process, removed by the watchdog (see remove_on_interrupt)
+_to_remove: set[str] = set()
 _lock = threading.Lock()
 
 
@@ -80,3 +101,61 @@ def raise_if_interrupted() -> None:
 def forget_interrupts() -> None:
     """Clear the record (a caller running commands in its own process, e.g. tests)."""
     _state["seen"] = False
+
+
+def note_reported() -> None:
+    """For the command: the interrupt was reported on stderr (the watchdog then does not report it again)."""
+    _state["reported"] = True
+
+
+def remove_on_interrupt(path) -> None:
+    """Record ``path`` (a staging folder or temporary file this process just made, holding nothing else) for removal
+    should the watchdog end the process. Paths renamed or removed since are harmless: nothing new takes their
+    random names."""
+    _to_remove.add(os.fspath(path))
+
+
+def start_watchdog(handler) -> bool:
+    """Main thread only: end the process :data:`INTERRUPT_GRACE_S` after a Ctrl-C that ``handler`` (the installed
+    SIGINT handler) took, if it still runs (see the module's docstring). False (nothing started) where a wake-up
+    descriptor is already in use (an event loop's) or off the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    try:
+        previous = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+    except ValueError:
+        previous = None
+    if previous != -1:  # someone else's descriptor (or none could be set): leave it
+        if previous is not None:
+            signal.set_wakeup_fd(previous)
+        os.close(r)
+        os.close(w)
+        return False
+    threading.Thread(target=_watch, args=(r, handler), name="semslam-interrupt-watchdog", daemon=True).start()
+    return True
+
+
+def _watch(r: int, handler) -> None:
+    """The watchdog's thread: wait for a SIGINT taken by ``handler``, then give the command its grace period."""
+    while True:
+        data = os.read(r, 64)
+        if not data:
+            return
+        if signal.SIGINT in data and signal.getsignal(signal.SIGINT) is handler:
+            break
+    deadline = time.monotonic() + INTERRUPT_GRACE_S
+    while (left := deadline - time.monotonic()) > 0:
+        select.select([], [], [], left)
+    for path in sorted(_to_remove, key=len, reverse=True):
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+    if not _state["reported"]:
+        os.write(2, b"semslam: interrupted\n")
+    os._exit(130)

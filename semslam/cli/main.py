@@ -26,7 +26,7 @@ from typing import Sequence
 
 from .. import __version__
 from ..errors import SemslamError
-from .._signals import defer_interrupt, interrupt_seen, note_interrupt
+from .._signals import defer_interrupt, interrupt_seen, note_interrupt, note_reported, start_watchdog
 
 
 def _command_modules() -> list[str]:
@@ -128,6 +128,7 @@ def _interrupted() -> int:
     if not _REPORTED[0]:
         print("semslam: interrupted", file=sys.stderr)
         _REPORTED[0] = True
+        note_reported()
     return 130
 
 
@@ -164,6 +165,7 @@ def console() -> None:
     included — end with one line and status 130, never a traceback. Once main returns, further Ctrl-Cs are
     ignored: the interpreter's exit (atexit handlers of numba, Dask, logging) is not interrupted half-way."""
     signal.signal(signal.SIGINT, _on_sigint)
+    start_watchdog(_on_sigint)  # a Ctrl-C ends the command even where the interrupt cannot (semslam._signals)
     sys.unraisablehook = _unraisable(sys.unraisablehook)
     try:
         code = main()

@@ -40,6 +40,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .._signals import remove_on_interrupt
 from ..errors import InputError
 from ..geometry import RigidTransform, quat_wxyz_from_rotation, rotation_from_quat_wxyz
 from ..io.ros.frames import C_NED_ENU, quat_xyzw_from_R_world_ned_vehicle_frd, vectors_enu_from_ned
@@ -239,6 +240,7 @@ def _write_bag(out: Path, single: bool, msgs: list, ts: Any, Writer: Any, Storag
     """Write ``msgs`` into a temporary sibling directory, then rename the bag (or its mcap file) to ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    remove_on_interrupt(tmpdir)
     try:
         bag = tmpdir / (out.stem if single else out.name)
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
