@@ -17,10 +17,10 @@ by :mod:`semslam._outdir` just before it swaps a staged output in): an interrupt
 behind, however the interrupt was lost (measured: a CI run's ``semslam simulate`` interrupted 2 s after its start
 wrote its whole mission and exited 130).
 
-**A Ctrl-C that never ends the command.** Whatever the cause (a library that swallows every interrupt and loops, a
-lock a half-finished import left held while the unwinding waits for a worker thread that needs it: measured once, a
-CI run's ``semslam run`` interrupted 0.3 s after its start still running 300 s later), the user's Ctrl-C must end
-the command. :func:`start_watchdog` (the ``semslam`` command calls it) starts a thread that Python's C-level signal
+**A Ctrl-C that never ends the command.** Whatever the cause (a first run on a fresh checkout compiles its kernels
+inside the warm-up's critical section: measured, a Ctrl-C 1.4-1.7 s into ``semslam run`` waited more than 17 s for
+the compilation; a library that swallows every interrupt and loops; or a cause not found: once, a CI run's ``semslam
+run`` interrupted 0.3 s after its start still ran 300 s later), the user's Ctrl-C must end the command. :func:`start_watchdog` (the ``semslam`` command calls it) starts a thread that Python's C-level signal
 handler wakes (:func:`signal.set_wakeup_fd`: it is written even while the main thread is stuck in native code); if
 the process still runs :data:`INTERRUPT_GRACE_S` after a Ctrl-C taken by the command's own handler, the thread
 removes the staging folders and temporary files this process made (:func:`remove_on_interrupt`: never an earlier
