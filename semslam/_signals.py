@@ -20,12 +20,13 @@ wrote its whole mission and exited 130).
 **A Ctrl-C that never ends the command.** Whatever the cause (a first run on a fresh checkout compiles its kernels
 inside the warm-up's critical section: measured, a Ctrl-C 1.4-1.7 s into ``semslam run`` waited more than 17 s for
 the compilation; a library that swallows every interrupt and loops; or a cause not found: once, a CI run's ``semslam
-run`` interrupted 0.3 s after its start still ran 300 s later), the user's Ctrl-C must end the command. :func:`start_watchdog` (the ``semslam`` command calls it) starts a thread that Python's C-level signal
-handler wakes (:func:`signal.set_wakeup_fd`: it is written even while the main thread is stuck in native code); if
-the process still runs :data:`INTERRUPT_GRACE_S` after a Ctrl-C taken by the command's own handler, the thread
-removes the staging folders and temporary files this process made (:func:`remove_on_interrupt`: never an earlier
-output moved aside during a swap), writes ``semslam: interrupted`` and ends the process with status 130. A command
-that took SIGINT over (the ROS node: a Ctrl-C is its normal end, then it writes its run) is not ended.
+run`` interrupted 0.3 s after its start still ran 300 s later), the user's Ctrl-C must end the command.
+:func:`start_watchdog` (the ``semslam`` command calls it) starts a thread that Python's C-level signal handler wakes
+(:func:`signal.set_wakeup_fd`: it is written even while the main thread is stuck in native code); if the process
+still runs :data:`INTERRUPT_GRACE_S` after a Ctrl-C taken by the command's own handler, the thread removes the
+staging folders and temporary files this process made (:func:`remove_on_interrupt`: never an earlier output moved
+aside during a swap), writes ``semslam: interrupted`` and ends the process with status 130. A command that took
+SIGINT over (the ROS node: a Ctrl-C is its normal end, then it writes its run) is not ended.
 """
 
 from __future__ import annotations
