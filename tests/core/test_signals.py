@@ -85,14 +85,18 @@ sig.remove_on_interrupt(staging / "part.bin")
 def swallow(argv=None):
     if mode == "takes_over":
         signal.signal(signal.SIGINT, lambda *a: None)
-    print("ready", flush=True)
     end = time.monotonic() + (3.0 if mode == "takes_over" else 20.0)
-    while time.monotonic() < end:
-        try:
-            time.sleep(0.02)
+    ready = False
+    while True:
+        try:  # "ready" printed inside: the one Ctrl-C, sent once it is read, cannot escape
+            if not ready:
+                ready = True
+                print("ready", flush=True)
+            while time.monotonic() < end:
+                time.sleep(0.02)
+            return 0
         except KeyboardInterrupt:
-            pass
-    return 0
+            continue
 
 
 cli.main = swallow
