@@ -158,5 +158,8 @@ def _watch(r: int, handler) -> None:
             except OSError:
                 pass
     if not _state["reported"]:
-        os.write(2, b"semslam: interrupted\n")
+        try:
+            os.write(2, b"semslam: interrupted\n")
+        except OSError:  # stderr closed: the status says it
+            pass
     os._exit(130)
