@@ -41,7 +41,8 @@ from contextlib import contextmanager
 from typing import Iterator
 
 __all__ = ["critical", "defer_interrupt", "note_interrupt", "interrupt_seen", "raise_if_interrupted",
-           "forget_interrupts", "start_watchdog", "remove_on_interrupt", "note_reported", "INTERRUPT_GRACE_S"]
+           "forget_interrupts", "start_watchdog", "remove_on_interrupt", "note_reported", "interrupt_reported",
+           "INTERRUPT_GRACE_S"]
 
 #: seconds a command has, after a Ctrl-C, to end by itself before the watchdog ends it (the unwinding waits for the
 #: scans in recognition: a few seconds)
@@ -104,9 +105,15 @@ def forget_interrupts() -> None:
     _state["seen"] = False
 
 
-def note_reported() -> None:
-    """For the command: the interrupt was reported on stderr (the watchdog then does not report it again)."""
-    _state["reported"] = True
+def note_reported(reported: bool = True) -> None:
+    """For the command: the interrupt was reported on stderr (the watchdog then does not report it again); False
+    clears the record (a new command in the same process)."""
+    _state["reported"] = bool(reported)
+
+
+def interrupt_reported() -> bool:
+    """Whether the interrupt was reported on stderr (:func:`note_reported`)."""
+    return bool(_state["reported"])
 
 
 def remove_on_interrupt(path) -> None:
@@ -157,7 +164,7 @@ def _watch(r: int, handler) -> None:
                 os.unlink(path)
             except OSError:
                 pass
-    if not _state["reported"]:
+    if not interrupt_reported():
         try:
             os.write(2, b"semslam: interrupted\n")
         except OSError:  # stderr closed: the status says it

@@ -26,7 +26,8 @@ from typing import Sequence
 
 from .. import __version__
 from ..errors import SemslamError
-from .._signals import defer_interrupt, interrupt_seen, note_interrupt, note_reported, start_watchdog
+from .._signals import (defer_interrupt, interrupt_reported, interrupt_seen, note_interrupt, note_reported,
+                        start_watchdog)
 
 
 def _command_modules() -> list[str]:
@@ -73,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # one (logging, numba, weakref.finalize) still run after it. Registered once however often main() runs.
     atexit.unregister(gc.freeze)
     atexit.register(gc.freeze)
-    _REPORTED[0] = False
+    note_reported(False)
     if argv is None:
         argv = sys.argv[1:]
     try:  # building the parsers imports the command's module: a Ctrl-C then is an interrupt like any other
@@ -119,15 +120,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             gc.enable()
 
 
-#: whether the interrupt was reported (whether one was received: semslam._signals.interrupt_seen)
-_REPORTED = [False]
-
-
 def _interrupted() -> int:
     """A Ctrl-C: one line (once), exit status 130 (128 + SIGINT)."""
-    if not _REPORTED[0]:
+    if not interrupt_reported():  # (shared with the watchdog: semslam._signals)
         print("semslam: interrupted", file=sys.stderr)
-        _REPORTED[0] = True
         note_reported()
     return 130
 
